@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# Installs everything dispmvs needs to build and test on Debian 12, from
+# Debian's own packages. Run as root (or with sudo available).
+set -euo pipefail
+export DEBIAN_FRONTEND=noninteractive
+SUDO=""
+if [ "$(id -u)" != 0 ]; then SUDO=sudo; fi
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libtorch-dev            # the network (LibTorch 1.13, CPU)
+  libeigen3-dev           # geometry in colmap_io and test references
+  libopencv-dev           # image I/O and resizing
+  libboost-program-options-dev
+  libgtest-dev libgmock-dev
+  colmap                  # the real peer in the interop tests
+)
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq "${packages[@]}"

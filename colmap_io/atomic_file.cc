@@ -1,0 +1,59 @@
+#include "colmap_io/atomic_file.h"
+
+#include <unistd.h>
+
+#include <atomic>
+#include <system_error>
+
+#include "colmap_io/error.h"
+
+namespace dispmvs::colmap_io {
+namespace {
+
+// Unique within the process (counter) and across processes (pid), so two
+// writers of the same file never share a temporary name.
+std::filesystem::path TemporaryNameFor(const std::filesystem::path& path) {
+  static std::atomic<unsigned long> counter{0};
+  return path.string() + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
+}
+
+}  // namespace
+
+AtomicFileWriter::AtomicFileWriter(const std::filesystem::path& path)
+    : path_(path), temp_path_(TemporaryNameFor(path)) {
+  std::error_code ec;
+  if (path_.has_parent_path()) {
+    std::filesystem::create_directories(path_.parent_path(), ec);
+    if (ec) throw IoError(path_.string(), "cannot create directory: " + ec.message());
+  }
+  stream_.open(temp_path_, std::ios::binary | std::ios::trunc);
+  if (!stream_) throw IoError(path_.string(), "cannot open for writing");
+}
+
+AtomicFileWriter::~AtomicFileWriter() {
+  if (!committed_) {
+    stream_.close();
+    std::error_code ec;
+    std::filesystem::remove(temp_path_, ec);
+  }
+}
+
+void AtomicFileWriter::Commit() {
+  stream_.flush();
+  const bool ok = static_cast<bool>(stream_);
+  stream_.close();
+  if (!ok || stream_.fail()) throw IoError(path_.string(), "write failed (disk full?)");
+  std::error_code ec;
+  std::filesystem::rename(temp_path_, path_, ec);
+  if (ec) throw IoError(path_.string(), "cannot rename temporary file into place: " + ec.message());
+  committed_ = true;
+}
+
+void WriteFileAtomically(const std::filesystem::path& path,
+                         const std::function<void(std::ostream&)>& write) {
+  AtomicFileWriter writer(path);
+  write(writer.stream());
+  writer.Commit();
+}
+
+}  // namespace dispmvs::colmap_io

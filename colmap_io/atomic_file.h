@@ -1,0 +1,42 @@
+#pragma once
+// Crash-safe output: every file a user sees is either absent or complete.
+// The content goes to a temporary name in the same directory, and only a
+// successful Commit() renames it over the final name (rename is atomic on
+// POSIX within one file system). An interrupted run leaves at most a
+// "*.tmp-*" file behind, never a truncated output under the real name.
+
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <string>
+
+namespace dispmvs::colmap_io {
+
+class AtomicFileWriter {
+ public:
+  // Creates the parent directory if needed. Throws IoError when the
+  // temporary file cannot be opened.
+  explicit AtomicFileWriter(const std::filesystem::path& path);
+  // Removes the temporary file unless Commit() succeeded.
+  ~AtomicFileWriter();
+  AtomicFileWriter(const AtomicFileWriter&) = delete;
+  AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+
+  std::ostream& stream() { return stream_; }
+  const std::filesystem::path& path() const { return path_; }
+  // Flushes, checks the stream, closes and renames into place; throws IoError
+  // (naming the final path) if anything failed.
+  void Commit();
+
+ private:
+  std::filesystem::path path_;
+  std::filesystem::path temp_path_;
+  std::ofstream stream_;
+  bool committed_ = false;
+};
+
+// Convenience: WriteFileAtomically(path, [&](std::ostream& out) { ... });
+void WriteFileAtomically(const std::filesystem::path& path,
+                         const std::function<void(std::ostream&)>& write);
+
+}  // namespace dispmvs::colmap_io

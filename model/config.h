@@ -1,0 +1,51 @@
+#pragma once
+// Sizes and iteration counts of the DispMVS network. Check() validates a
+// configuration; Paper() matches the authors' release, Small() is a reduced
+// network for CPU work and tests. The configuration travels with the weights
+// as safetensors metadata (ToMetadata / FromMetadata).
+
+#include <cstdint>
+#include <map>
+#include <string>
+
+namespace dispmvs::model {
+
+struct ModelConfig {
+  std::string name = "paper";
+
+  // Matching-feature encoder (all views): channels at 1/16 and 1/4.
+  int64_t match_coarse_channels = 128;
+  int64_t match_fine_channels = 96;
+  // Width of the first encoder layer; deeper layers scale from it.
+  int64_t encoder_base_channels = 32;
+
+  // Context encoder (reference only): per stage, GRU hidden state (tanh) and
+  // context input (relu); the encoder outputs hidden + input channels.
+  int64_t hidden_coarse = 128;
+  int64_t context_input_coarse = 128;
+  int64_t hidden_fine = 96;
+  int64_t context_input_fine = 96;
+  bool deformable_context_decoder = true;
+
+  // Epipolar correlation: pooled levels x samples per level.
+  int64_t coarse_levels = 4;
+  int64_t coarse_samples = 9;
+  int64_t fine_levels = 2;
+  int64_t fine_samples = 5;
+
+  // GRU iterations per stage.
+  int64_t coarse_iterations = 8;
+  int64_t fine_iterations = 2;
+
+  // Throws std::invalid_argument naming the first bad field.
+  void Check() const;
+
+  static ModelConfig Paper();
+  static ModelConfig Small();
+
+  std::map<std::string, std::string> ToMetadata() const;
+  // Throws std::invalid_argument on a missing or malformed key.
+  static ModelConfig FromMetadata(const std::map<std::string, std::string>& metadata);
+};
+
+}  // namespace dispmvs::model

@@ -1,0 +1,100 @@
+#pragma once
+// Epipolar geometry of DispMVS, in batched, differentiable LibTorch ops.
+// Read this file against the paper (Sec. "Flow and Depth", "E-flow") and
+// docs in ../shared/docs/method-notes.md.
+//
+// Conventions
+//  * Pixel coordinates are in the pixel-index convention of the tensor the
+//    network works on: the centre of pixel (row i, col j) is (x, y) = (j, i).
+//    (COLMAP puts the top-left pixel centre at (0.5, 0.5); the conversion
+//    happens once, where intrinsics enter the model.)
+//  * K_ref, K_src: [B,3,3] intrinsics at the resolution of the current stage.
+//  * R, T: [B,3,3], [B,3]: the rigid motion mapping reference-camera
+//    coordinates to source-camera coordinates (X_s = R X_r + T).
+//  * Depth is handled as inverse depth w = 1/d throughout; w = 0 is a point at
+//    infinity and is representable.
+//
+// With a = K_s R K_r^-1 p~ and b = K_s T, the source pixel of reference pixel p
+// at inverse depth w is  p_s(w) = (a_xy + w b_xy) / (a_z + w b_z).
+// Every function returns finite values everywhere; where the geometry is
+// degenerate (zero baseline, epipole, behind a camera, non-finite input) the
+// returned `valid` mask is false.
+
+#include <torch/torch.h>
+
+namespace dispmvs::model {
+
+// Per-pixel projection coefficients of one reference/source pair.
+struct EpipolarPair {
+  torch::Tensor a;  // [B,3,H,W]  K_s R K_r^-1 p~
+  torch::Tensor b;  // [B,3,1,1]  K_s T
+};
+
+// Pixel-centre grid [1,2,H,W] holding (x, y) = (col, row).
+torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOptions& options);
+
+EpipolarPair MakeEpipolarPair(const torch::Tensor& K_ref, const torch::Tensor& K_src,
+                              const torch::Tensor& R, const torch::Tensor& T,
+                              int64_t height, int64_t width);
+
+struct SourcePixels {
+  torch::Tensor xy;     // [B,2,H,W]
+  torch::Tensor valid;  // [B,1,H,W] bool: w finite and >= 0, point in front of the source camera
+};
+// Source pixel of every reference pixel at inverse depth w [B,1,H,W].
+SourcePixels ProjectInverseDepth(const EpipolarPair& pair, const torch::Tensor& inv_depth);
+
+struct EpipolarDirection {
+  torch::Tensor dir;    // [B,2,H,W] unit vector along dp_s/dw (towards nearer points); 0 where invalid
+  torch::Tensor valid;  // [B,1,H,W] bool: false at zero baseline and at the epipole
+};
+// Analytic, scale-free epipolar direction: dp_s/dw is proportional to
+// (b_xy a_z - a_xy b_z), independent of w, so the line is straight and the
+// direction does not depend on the unit of the scene.
+EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair);
+
+struct InverseDepth {
+  torch::Tensor inv_depth;  // [B,1,H,W]; 0 where invalid
+  torch::Tensor valid;      // [B,1,H,W] bool: w > 0 and finite, in front of both cameras
+};
+// Closed-form triangulation of the matched source pixel xy [B,2,H,W]:
+//   w = (a_x - u a_z) / (u b_z - b_x)   or   w = (a_y - v a_z) / (v b_z - b_y),
+// taking the equation with the larger denominator (the paper's Eq. 7
+// selection by the larger flow component).
+InverseDepth TriangulateInverseDepth(const EpipolarPair& pair, const torch::Tensor& src_xy);
+
+// E-flow <-> source pixel, for a base point and direction held fixed within a stage.
+torch::Tensor EflowToSourcePixel(const torch::Tensor& base_xy, const torch::Tensor& dir,
+                                 const torch::Tensor& eflow /*[B,1,H,W]*/);
+torch::Tensor SourcePixelToEflow(const torch::Tensor& base_xy, const torch::Tensor& dir,
+                                 const torch::Tensor& src_xy);
+
+// Softmax-weighted fusion over the source axis: inv_depths, logits, valid are
+// [B,N,H,W]; invalid pairs get zero weight. Returns fused inverse depth
+// [B,1,H,W], the weights [B,N,H,W], and a mask [B,1,H,W] of pixels with at
+// least one valid pair.
+struct FusedInverseDepth {
+  torch::Tensor inv_depth;
+  torch::Tensor weights;
+  torch::Tensor valid;
+};
+FusedInverseDepth FuseInverseDepths(const torch::Tensor& inv_depths, const torch::Tensor& logits,
+                                    const torch::Tensor& valid);
+
+// Uniform random inverse depth in [1/d_max, 1/d_min]; d_min, d_max are [B]
+// tensors (per-sample range hint). Shape [B,1,H,W].
+torch::Tensor RandomInverseDepth(const torch::Tensor& d_min, const torch::Tensor& d_max,
+                                 int64_t height, int64_t width, torch::Generator generator = {});
+
+// (w - 1/d_max) / (1/d_min - 1/d_max): 0 at d_max, 1 at d_min. Not clipped:
+// values outside the hint stay valid. d_min, d_max are [B] tensors.
+torch::Tensor NormalizeInverseDepth(const torch::Tensor& inv_depth, const torch::Tensor& d_min,
+                                    const torch::Tensor& d_max);
+torch::Tensor DenormalizeInverseDepth(const torch::Tensor& normalized, const torch::Tensor& d_min,
+                                      const torch::Tensor& d_max);
+
+// Intrinsics of a stage at 1/factor resolution, in the pixel-index convention:
+// c' = (c + 0.5) / factor - 0.5, f' = f / factor.
+torch::Tensor ScaleIntrinsics(const torch::Tensor& K, double factor);
+
+}  // namespace dispmvs::model
