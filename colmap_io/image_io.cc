@@ -1,0 +1,137 @@
+#include "colmap_io/image_io.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <system_error>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "colmap_io/error.h"
+
+namespace dispmvs::colmap_io {
+namespace {
+
+std::string SizeToString(const cv::Size& size) {
+  return std::to_string(size.width) + "x" + std::to_string(size.height);
+}
+
+void CheckSize(const cv::Size& size, const char* what) {
+  if (size.width < 1 || size.height < 1) {
+    throw std::invalid_argument(std::string(what) + ": image size must be positive, got " +
+                                SizeToString(size));
+  }
+}
+
+}  // namespace
+
+cv::Mat ReadImageRgb(const std::filesystem::path& path) {
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(path, error)) {
+    throw IoError(path.string(), "image file does not exist");
+  }
+  // IMREAD_UNCHANGED keeps 16-bit data and the channel count as stored
+  // (IMREAD_COLOR would silently reduce 16-bit images to 8 bits).
+  cv::Mat raw;
+  try {
+    raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    throw IoError(path.string(), std::string("cannot decode image: ") + e.what());
+  }
+  if (raw.empty()) throw IoError(path.string(), "cannot decode image");
+
+  double scale = 0.0;
+  switch (raw.depth()) {
+    case CV_8U: scale = 1.0 / 255.0; break;
+    case CV_16U: scale = 1.0 / 65535.0; break;
+    default:
+      throw IoError(path.string(), "unsupported pixel type (only 8-bit and 16-bit images)");
+  }
+
+  // OpenCV stores colour as BGR(A).
+  cv::Mat rgb;
+  switch (raw.channels()) {
+    case 1: cv::cvtColor(raw, rgb, cv::COLOR_GRAY2RGB); break;
+    case 3: cv::cvtColor(raw, rgb, cv::COLOR_BGR2RGB); break;
+    case 4: cv::cvtColor(raw, rgb, cv::COLOR_BGRA2RGB); break;
+    default:
+      throw IoError(path.string(),
+                    "unsupported channel count " + std::to_string(raw.channels()));
+  }
+  cv::Mat result;
+  rgb.convertTo(result, CV_32FC3, scale);
+  return result;
+}
+
+cv::Size ComputeResizedSize(const cv::Size& size, int max_image_size) {
+  CheckSize(size, "ComputeResizedSize");
+  if (max_image_size <= 0 ||
+      (size.width <= max_image_size && size.height <= max_image_size)) {
+    return size;
+  }
+  // Single precision on purpose: COLMAP computes the factor and the products
+  // in float, and double precision gives a different size now and then (1440 x
+  // 702 at 1000: COLMAP 1000 x 487, double 1000 x 488). Same sizes as COLMAP
+  // let our maps be compared with PatchMatch's pixel for pixel.
+  const float limit = static_cast<float>(max_image_size);
+  const float factor = std::min(limit / static_cast<float>(size.width),
+                                limit / static_cast<float>(size.height));
+  const auto scaled_side = [factor](int side) {
+    const float scaled = std::round(static_cast<float>(side) * factor);
+    return std::max(1, static_cast<int>(scaled));  // never 0 for extreme aspect ratios
+  };
+  return {scaled_side(size.width), scaled_side(size.height)};
+}
+
+Eigen::Matrix3d ScaleIntrinsics(const Eigen::Matrix3d& K, const cv::Size& old_size,
+                                const cv::Size& new_size) {
+  CheckSize(old_size, "ScaleIntrinsics");
+  CheckSize(new_size, "ScaleIntrinsics");
+  const double scale_x = static_cast<double>(new_size.width) / old_size.width;
+  const double scale_y = static_cast<double>(new_size.height) / old_size.height;
+  Eigen::Matrix3d scaled = K;
+  scaled.row(0) *= scale_x;
+  scaled.row(1) *= scale_y;
+  return scaled;
+}
+
+ResizedImage ResizeToMaxImageSize(const cv::Mat& image, const Eigen::Matrix3d& K,
+                                  int max_image_size) {
+  if (image.empty()) throw std::invalid_argument("ResizeToMaxImageSize: empty image");
+  const cv::Size new_size = ComputeResizedSize(image.size(), max_image_size);
+  ResizedImage result;
+  if (new_size == image.size()) {
+    result.image = image.clone();
+    result.K = K;
+    return result;
+  }
+  cv::resize(image, result.image, new_size, 0.0, 0.0, cv::INTER_AREA);
+  result.K = ScaleIntrinsics(K, image.size(), new_size);
+  return result;
+}
+
+ResizedImage ReadImageForCamera(const std::filesystem::path& path, const Camera& camera,
+                                int max_image_size) {
+  const Eigen::Matrix3d K = camera.CalibrationMatrix();
+  const cv::Mat image = ReadImageRgb(path);
+  if (static_cast<uint64_t>(image.cols) != camera.width ||
+      static_cast<uint64_t>(image.rows) != camera.height) {
+    throw IoError(path.string(),
+                  "image is " + SizeToString(image.size()) + " but camera " +
+                      std::to_string(camera.camera_id) + " is " +
+                      std::to_string(camera.width) + "x" + std::to_string(camera.height) +
+                      " (dense MVS needs the undistorted images)");
+  }
+  return ResizeToMaxImageSize(image, K, max_image_size);
+}
+
+Eigen::Matrix3d ToPixelIndexConvention(const Eigen::Matrix3d& K_colmap) {
+  Eigen::Matrix3d K = K_colmap;
+  K(0, 2) -= 0.5;
+  K(1, 2) -= 0.5;
+  return K;
+}
+
+}  // namespace dispmvs::colmap_io

@@ -1,0 +1,194 @@
+#include "colmap_io/view_selection.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "tests/support/model_builder.h"
+
+namespace dispmvs::colmap_io {
+namespace {
+
+using testing::ModelBuilder;
+
+constexpr double kPi = 3.14159265358979323846;
+double Radians(double degrees) { return degrees * kPi / 180.0; }
+
+// Reference at (0, 0, -10) looking at the origin; views on a circle of radius
+// 10 around the origin in the x-z plane, so a point AT the origin is seen
+// from the reference and from a view at angle theta under exactly theta.
+struct CircleScene {
+  ModelBuilder builder;
+  camera_t camera = builder.AddPinholeCamera(320, 240, 300, 300, 160, 120);
+  image_t reference = builder.AddImageLookingAt(camera, "ref.png", {0, 0, -10}, {0, 0, 0});
+
+  image_t AddViewAt(double theta_deg, const std::string& name) {
+    const double t = Radians(theta_deg);
+    return builder.AddImageLookingAt(camera, name, {10 * std::sin(t), 0, -10 * std::cos(t)},
+                                     {0, 0, 0});
+  }
+  // `count` points near the origin seen by the reference and `others`.
+  void AddSharedPoints(int count, const std::vector<image_t>& others) {
+    std::vector<image_t> observers = {reference};
+    observers.insert(observers.end(), others.begin(), others.end());
+    for (int i = 0; i < count; ++i) {
+      builder.AddPoint({0.05 * (i % 7) - 0.15, 0.04 * (i % 5) - 0.1, 0.03 * (i % 3)}, observers);
+    }
+  }
+};
+
+TEST(ViewSelectionTest, OrdersBySharedPointsNotById) {
+  CircleScene scene;
+  const image_t ten = scene.AddViewAt(10, "ten.png");       // id 2
+  const image_t thirty = scene.AddViewAt(-15, "thirty.png");  // id 3
+  const image_t twenty = scene.AddViewAt(20, "twenty.png");   // id 4
+  scene.AddSharedPoints(10, {ten, thirty, twenty});
+  scene.AddSharedPoints(10, {thirty, twenty});
+  scene.AddSharedPoints(10, {thirty});
+
+  const auto ranked = RankSourceViews(scene.builder.model(), scene.reference);
+  ASSERT_EQ(ranked.size(), 3u);
+  EXPECT_EQ(ranked[0].image_id, thirty);
+  EXPECT_EQ(ranked[0].num_shared_points, 30u);
+  EXPECT_EQ(ranked[1].image_id, twenty);
+  EXPECT_EQ(ranked[1].num_shared_points, 20u);
+  EXPECT_EQ(ranked[2].image_id, ten);
+  EXPECT_EQ(ranked[2].num_shared_points, 10u);
+
+  EXPECT_EQ(SelectSourceViews(scene.builder.model(), scene.reference, 2),
+            (std::vector<image_t>{thirty, twenty}));
+  // Asking for more than exist returns all of them; asking for none, none.
+  EXPECT_EQ(SelectSourceViews(scene.builder.model(), scene.reference, 10),
+            (std::vector<image_t>{thirty, twenty, ten}));
+  EXPECT_TRUE(SelectSourceViews(scene.builder.model(), scene.reference, 0).empty());
+}
+
+TEST(ViewSelectionTest, TiesAreBrokenByAscendingImageId) {
+  CircleScene scene;
+  const image_t a = scene.AddViewAt(10, "a.png");
+  const image_t b = scene.AddViewAt(-10, "b.png");
+  const image_t c = scene.AddViewAt(20, "c.png");
+  scene.AddSharedPoints(5, {c, b});
+  scene.AddSharedPoints(5, {a});
+  scene.AddSharedPoints(3, {c, b});
+  scene.AddSharedPoints(3, {a});
+  EXPECT_EQ(SelectSourceViews(scene.builder.model(), scene.reference, 3),
+            (std::vector<image_t>{a, b, c}));
+}
+
+TEST(ViewSelectionTest, ZeroBaselineViewIsExcludedHoweverManyPointsItShares) {
+  CircleScene scene;
+  const image_t good = scene.AddViewAt(15, "good.png");
+  // Same centre as the reference, looking slightly elsewhere: every
+  // triangulation angle is 0.
+  const image_t rotated_only =
+      scene.builder.AddImageLookingAt(scene.camera, "rotated.png", {0, 0, -10}, {0.5, 0.2, 0});
+  scene.AddSharedPoints(40, {rotated_only});
+  scene.AddSharedPoints(5, {good});
+  const auto ranked = RankSourceViews(scene.builder.model(), scene.reference);
+  ASSERT_EQ(ranked.size(), 1u);
+  EXPECT_EQ(ranked[0].image_id, good);
+
+  ViewSelectionOptions no_minimum;
+  no_minimum.min_triangulation_angle_deg = 0.0;  // angle 0 >= 0 passes
+  const auto all = RankSourceViews(scene.builder.model(), scene.reference, no_minimum);
+  ASSERT_EQ(all.size(), 2u);
+  EXPECT_EQ(all[0].image_id, rotated_only);
+  EXPECT_NEAR(all[0].triangulation_angle_deg, 0.0, 1e-9);  // centres equal up to rounding
+}
+
+TEST(ViewSelectionTest, AngleOfPointsAtTheCircleCentreIsTheViewAngle) {
+  CircleScene scene;
+  const image_t view = scene.AddViewAt(30, "v.png");
+  for (int i = 0; i < 4; ++i) scene.builder.AddPoint({0, 0, 0}, {scene.reference, view});
+  const auto ranked = RankSourceViews(scene.builder.model(), scene.reference);
+  ASSERT_EQ(ranked.size(), 1u);
+  EXPECT_NEAR(ranked[0].triangulation_angle_deg, 30.0, 1e-9);
+
+  ViewSelectionOptions options;
+  options.min_triangulation_angle_deg = 30.5;
+  EXPECT_TRUE(RankSourceViews(scene.builder.model(), scene.reference, options).empty());
+  options.min_triangulation_angle_deg = 29.5;
+  EXPECT_EQ(RankSourceViews(scene.builder.model(), scene.reference, options).size(), 1u);
+}
+
+TEST(ViewSelectionTest, ObtuseAnglesAreFoldedToTheAcuteSide) {
+  CircleScene scene;
+  // A view at 150 degrees sees the origin under 150 degrees; COLMAP folds it
+  // to 180 - 150 = 30.
+  const image_t view = scene.AddViewAt(150, "behind.png");
+  scene.builder.AddPoint({0, 0, 0}, {scene.reference, view});
+  const auto ranked = RankSourceViews(scene.builder.model(), scene.reference);
+  ASSERT_EQ(ranked.size(), 1u);
+  EXPECT_NEAR(ranked[0].triangulation_angle_deg, 30.0, 1e-9);
+}
+
+TEST(ViewSelectionTest, PairAngleIsTheRequestedPercentileOfPointAngles) {
+  ModelBuilder builder;
+  const camera_t camera = builder.AddPinholeCamera(320, 240, 300, 300, 160, 120);
+  const image_t reference = builder.AddImageLookingAt(camera, "ref.png", {0, 0, -10}, {0, 0, 0});
+  const image_t view = builder.AddImageLookingAt(camera, "v.png", {1, 0, -10}, {1, 0, 0});
+  // A point on the reference's axis at distance s is seen under atan(1 / s):
+  // place points under 8, 2, 6, 4 degrees (unsorted on purpose).
+  for (const double degrees : {8.0, 2.0, 6.0, 4.0}) {
+    builder.AddPoint({0, 0, -10 + 1.0 / std::tan(Radians(degrees))}, {reference, view});
+  }
+  const auto angle_at = [&](double percentile) {
+    ViewSelectionOptions options;
+    options.min_triangulation_angle_deg = 0.0;
+    options.triangulation_angle_percentile = percentile;
+    const auto ranked = RankSourceViews(builder.model(), reference, options);
+    EXPECT_EQ(ranked.size(), 1u);
+    return ranked.empty() ? -1.0 : ranked[0].triangulation_angle_deg;
+  };
+  // Index round(p / 100 * 3) into {2, 4, 6, 8}.
+  EXPECT_NEAR(angle_at(75.0), 6.0, 1e-9);  // round(2.25) = 2
+  EXPECT_NEAR(angle_at(0.0), 2.0, 1e-9);
+  EXPECT_NEAR(angle_at(40.0), 4.0, 1e-9);  // round(1.2) = 1
+  EXPECT_NEAR(angle_at(100.0), 8.0, 1e-9);
+
+  ViewSelectionOptions options;  // default: 75th percentile = 6 degrees
+  options.min_triangulation_angle_deg = 7.0;
+  EXPECT_TRUE(SelectSourceViews(builder.model(), reference, 4, options).empty());
+  options.min_triangulation_angle_deg = 5.0;
+  EXPECT_EQ(SelectSourceViews(builder.model(), reference, 4, options),
+            (std::vector<image_t>{view}));
+}
+
+TEST(ViewSelectionTest, RepeatedObservationCountsOnce) {
+  CircleScene scene;
+  const image_t view = scene.AddViewAt(20, "v.png");
+  scene.builder.AddPoint({0, 0, 0}, {scene.reference, scene.reference, view, view});
+  const auto ranked = RankSourceViews(scene.builder.model(), scene.reference);
+  ASSERT_EQ(ranked.size(), 1u);
+  EXPECT_EQ(ranked[0].num_shared_points, 1u);
+}
+
+TEST(ViewSelectionTest, ImageWithoutPointsGetsNoSources) {
+  CircleScene scene;
+  const image_t view = scene.AddViewAt(20, "v.png");
+  const image_t lonely = scene.AddViewAt(-20, "lonely.png");
+  scene.AddSharedPoints(10, {view});
+  scene.builder.AddUnmatchedObservation(lonely, {3, 4});
+  EXPECT_TRUE(SelectSourceViews(scene.builder.model(), lonely, 4).empty());
+}
+
+TEST(ViewSelectionTest, BadArgumentsThrow) {
+  CircleScene scene;
+  EXPECT_THROW(RankSourceViews(scene.builder.model(), 42), std::invalid_argument);
+  ViewSelectionOptions options;
+  options.min_triangulation_angle_deg = -1.0;
+  EXPECT_THROW(options.Check(), std::invalid_argument);
+  EXPECT_THROW(SelectSourceViews(scene.builder.model(), scene.reference, 1, options),
+               std::invalid_argument);
+  options = {};
+  options.triangulation_angle_percentile = 101.0;
+  EXPECT_THROW(options.Check(), std::invalid_argument);
+  options.triangulation_angle_percentile = std::nan("");
+  EXPECT_THROW(options.Check(), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace dispmvs::colmap_io

@@ -1,0 +1,172 @@
+# Command-line tests of dispmvs_colmap, run by ctest as
+#   cmake -DPROGRAM=<dispmvs_colmap> -DWORK_DIR=<scratch dir> -DCASE=<name> -P <this file>
+# Each case runs the program and checks its exit status and output; any
+# mismatch is a FATAL_ERROR (the test fails).
+#
+# The "plan_*" cases build a tiny dense workspace by hand (text sparse model,
+# empty image files) whose plan is known in advance:
+#   PINHOLE camera, identity rotations, centres at x = 0, 1, 2, 3 for
+#   a.png, sub/b.png, c.png, d.png; points (depth = z for every image):
+#     P1 (0.5, 0, 4) seen by a, b       P2 (1, 0, 5) seen by a, b, c
+#     P3 (1.5, 0, 6) seen by a, b, c    P4 (1, 0, 8) seen by a, b
+#   Depth ranges (COLMAP's rule, percentiles 0.01 / 0.99 of the sorted depths,
+#   stretch 0.25): a, b: depths 4 5 6 8 -> [0.75 * 4, 1.25 * 8] = [3, 10];
+#   c: depths 5 6 -> [3.75, 7.5]; d sees nothing -> fallback, the union [3, 10].
+#   Shared points: a-b 4, a-c 2, b-c 2; the pairs' triangulation angles
+#   (75th percentile over shared points) are about 11, 23 and 11 degrees. So
+#   __auto__ gives a: b, c; b: a, c; c: a, b (tie broken by id); d: nothing
+#   (skipped); and a 60 degree minimum leaves nobody any source.
+
+cmake_minimum_required(VERSION 3.18)
+
+foreach(var PROGRAM WORK_DIR CASE)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "dispmvs_colmap_cli_test: -D${var}=... is required")
+  endif()
+endforeach()
+
+set(tab "\t")
+
+function(make_workspace root)
+  file(REMOVE_RECURSE "${root}")
+  file(MAKE_DIRECTORY "${root}/images/sub" "${root}/sparse")
+  foreach(name a.png sub/b.png c.png d.png)
+    file(WRITE "${root}/images/${name}" "")
+  endforeach()
+  file(WRITE "${root}/sparse/cameras.txt"
+    "# Camera list\n"
+    "1 PINHOLE 100 100 100 100 50 50\n")
+  # points2D "X Y POINT3D_ID" (projections of the points above).
+  file(WRITE "${root}/sparse/images.txt"
+    "# Image list\n"
+    "1 1 0 0 0 0 0 0 1 a.png\n"
+    "62.5 50 1 70 50 2 75 50 3 62.5 50 4\n"
+    "2 1 0 0 0 -1 0 0 1 sub/b.png\n"
+    "37.5 50 1 50 50 2 58.3333 50 3 50 50 4\n"
+    "3 1 0 0 0 -2 0 0 1 c.png\n"
+    "30 50 2 41.6667 50 3\n"
+    "4 1 0 0 0 -3 0 0 1 d.png\n"
+    "\n")
+  file(WRITE "${root}/sparse/points3D.txt"
+    "# 3D point list\n"
+    "1 0.5 0 4 255 0 0 0.5 1 0 2 0\n"
+    "2 1 0 5 0 255 0 0.5 1 1 2 1 3 0\n"
+    "3 1.5 0 6 0 0 255 0.5 1 2 2 2 3 1\n"
+    "4 1 0 8 9 9 9 0.5 1 3 2 3\n")
+endfunction()
+
+# Runs the program with ARGN; sets rc, out, err in the caller.
+macro(run_program)
+  execute_process(COMMAND "${PROGRAM}" ${ARGN}
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+endmacro()
+
+function(expect_rc expected)
+  if(NOT rc EQUAL expected)
+    message(FATAL_ERROR "exit status ${rc}, expected ${expected}\nstdout:\n${out}\nstderr:\n${err}")
+  endif()
+endfunction()
+
+function(expect_contains text fragment)
+  string(FIND "${text}" "${fragment}" position)
+  if(position EQUAL -1)
+    message(FATAL_ERROR "output lacks \"${fragment}\"\nstdout:\n${out}\nstderr:\n${err}")
+  endif()
+endfunction()
+
+# A failure must be one "error: ..." line on stderr and nothing on stdout.
+function(expect_error_line fragment)
+  expect_rc(1)
+  if(NOT err MATCHES "^error: [^\n]+\n$")
+    message(FATAL_ERROR "stderr is not one \"error: ...\" line:\n${err}")
+  endif()
+  if(NOT out STREQUAL "")
+    message(FATAL_ERROR "unexpected stdout on failure:\n${out}")
+  endif()
+  expect_contains("${err}" "${fragment}")
+endfunction()
+
+set(ws "${WORK_DIR}/ws")
+
+if(CASE STREQUAL "help")
+  run_program(--help)
+  expect_rc(0)
+  expect_contains("${out}" "--workspace_path")
+  expect_contains("${out}" "--max_num_src_images")
+  expect_contains("${out}" "patch-match.cfg")
+elseif(CASE STREQUAL "missing_workspace_option")
+  run_program()
+  expect_error_line("--workspace_path is required")
+elseif(CASE STREQUAL "bad_workspace_path")
+  run_program(--workspace_path "${WORK_DIR}/does_not_exist")
+  expect_error_line("does_not_exist: workspace folder does not exist")
+elseif(CASE STREQUAL "bad_option_values")
+  foreach(bad "--max_num_src_images=-3" "--max_num_src_images=0")
+    run_program(--workspace_path "${WORK_DIR}" ${bad})
+    expect_error_line("--max_num_src_images must be at least 1")
+  endforeach()
+  run_program(--workspace_path "${WORK_DIR}" --min_triangulation_angle nan)
+  expect_error_line("--min_triangulation_angle must be a finite number")
+  run_program(--workspace_path "${WORK_DIR}" --depth_stretch_ratio 1.5)
+  expect_error_line("--depth_stretch_ratio")
+  run_program(--workspace_path "${WORK_DIR}" --depth_min_percentile 0.9 --depth_max_percentile 0.1)
+  expect_error_line("--depth_min_percentile must not exceed")
+  run_program(--workspace_path "${WORK_DIR}" --max_num_src_images abc)
+  expect_error_line("max_num_src_images")
+  run_program(--workspace_path "${WORK_DIR}" --no_such_option)
+  expect_error_line("no_such_option")
+elseif(CASE STREQUAL "plan_auto")
+  make_workspace("${ws}")
+  run_program(--workspace_path "${ws}")
+  expect_rc(0)
+  expect_contains("${out}" "a.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=sub/b.png,c.png\n")
+  expect_contains("${out}" "sub/b.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=a.png,c.png\n")
+  expect_contains("${out}" "c.png${tab}d_min=3.75${tab}d_max=7.5${tab}points=2${tab}sources=a.png,sub/b.png\n")
+  expect_contains("${out}" "d.png${tab}d_min=3${tab}d_max=10${tab}points=0${tab}fallback${tab}sources=(none")
+  # --max_num_src_images caps __auto__.
+  run_program(--workspace_path "${ws}" --max_num_src_images 1)
+  expect_rc(0)
+  expect_contains("${out}" "a.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=sub/b.png\n")
+  expect_contains("${out}" "c.png${tab}d_min=3.75${tab}d_max=7.5${tab}points=2${tab}sources=a.png\n")
+  # A triangulation angle nobody reaches leaves every image without sources.
+  run_program(--workspace_path "${ws}" --min_triangulation_angle 60)
+  expect_rc(0)
+  expect_contains("${out}" "a.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=(none")
+elseif(CASE STREQUAL "plan_config")
+  make_workspace("${ws}")
+  file(WRITE "${ws}/stereo/patch-match.cfg"
+    "# hand written\r\n"
+    "c.png\r\n"
+    "__all__\r\n"
+    "a.png\r\n"
+    "c.png, sub/b.png\r\n"
+    "sub/b.png\r\n"
+    "__auto__, 1\r\n")
+  run_program(--workspace_path "${ws}")
+  expect_rc(0)
+  expect_contains("${out}" "c.png${tab}d_min=3.75${tab}d_max=7.5${tab}points=2${tab}sources=a.png,sub/b.png,d.png\n")
+  expect_contains("${out}" "a.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=c.png,sub/b.png\n")
+  expect_contains("${out}" "sub/b.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=a.png\n")
+  # d.png is not a reference in this config.
+  string(FIND "${out}" "d.png${tab}" position)
+  if(NOT position EQUAL -1)
+    message(FATAL_ERROR "d.png planned although the config does not list it:\n${out}")
+  endif()
+elseif(CASE STREQUAL "plan_errors")
+  make_workspace("${ws}")
+  file(WRITE "${ws}/stereo/patch-match.cfg" "a.png\nghost.png\n")
+  run_program(--workspace_path "${ws}")
+  expect_error_line("patch-match.cfg: source image \"ghost.png\"")
+  file(WRITE "${ws}/stereo/patch-match.cfg" "a.png\n__auto__, zero\n")
+  run_program(--workspace_path "${ws}")
+  expect_error_line("patch-match.cfg: line 2")
+  file(REMOVE "${ws}/stereo/patch-match.cfg")
+  file(REMOVE "${ws}/images/c.png")
+  run_program(--workspace_path "${ws}")
+  expect_error_line("c.png: image file of the sparse model is missing")
+  file(REMOVE_RECURSE "${ws}/sparse")
+  run_program(--workspace_path "${ws}")
+  expect_error_line("sparse folder of the workspace does not exist")
+else()
+  message(FATAL_ERROR "unknown CASE ${CASE}")
+endif()
