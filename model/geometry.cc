@@ -1,0 +1,438 @@
+// Epipolar geometry of DispMVS. See geometry.h for the conventions and
+// ../shared/docs/method-notes.md ("Geometry") for the derivations.
+//
+// Two rules hold in every function below:
+//  * Degenerate geometry is detected with thresholds RELATIVE to the
+//    magnitudes of the terms that cancel (see IsClearlyPositive). Scaling the
+//    scene by s multiplies b = K_s T by s and divides w by s, so the products
+//    w b, the ratios between b components, and a are unit-free; every test
+//    below compares quantities of the same unit and gives the same mask for a
+//    scene in millimetres and in kilometres.
+//  * Nothing non-finite is ever created, not even in a masked-out branch:
+//    inputs are cleaned (non-finite -> 0) on entry, and denominators are
+//    replaced by 1 with torch::where BEFORE dividing. torch::where only masks
+//    the forward value; its backward still runs the masked branch with a zero
+//    incoming gradient, and 0 * inf = NaN would leak into the gradients.
+
+#include "model/geometry.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace dispmvs::model {
+namespace {
+
+// Relative tolerance of the degeneracy tests: sqrt(machine epsilon).
+// A quantity obtained by cancellation (e.g. the epipolar gradient
+// b_xy a_z - a_xy b_z near the epipole) carries an absolute rounding error of
+// a few eps * (magnitude of the terms). Once it falls below sqrt(eps) times
+// those terms its relative error exceeds ~sqrt(eps) (3e-4 in float32), so a
+// direction or depth computed from it is no longer trustworthy.
+double RelativeTolerance(torch::ScalarType dtype) {
+  switch (dtype) {
+    case torch::kFloat64:
+      return std::sqrt(std::numeric_limits<double>::epsilon());
+    case torch::kFloat32:
+      return std::sqrt(static_cast<double>(std::numeric_limits<float>::epsilon()));
+    case torch::kFloat16:
+      return std::sqrt(9.765625e-4);  // 2^-10
+    case torch::kBFloat16:
+      return std::sqrt(7.8125e-3);  // 2^-7
+    default:
+      throw std::invalid_argument("dispmvs geometry: tensors must have a floating-point dtype");
+  }
+}
+
+// No image is 2^24 pixels wide, and float32 cannot even address single pixels
+// beyond that: a projection further out is treated as unusable. The bound
+// also keeps quotients (and their gradients) far from overflow when a ray is
+// almost parallel to the source image plane.
+constexpr double kMaxPixelCoordinate = 16777216.0;  // 2^24
+
+void CheckFloating(const torch::Tensor& t, const char* name) {
+  if (!t.defined()) {
+    throw std::invalid_argument(std::string("dispmvs geometry: ") + name + " is undefined");
+  }
+  if (!t.is_floating_point()) {
+    throw std::invalid_argument(std::string("dispmvs geometry: ") + name +
+                                " must have a floating-point dtype");
+  }
+}
+
+// [B,C,H,W] with the given channel count (C < 0: any).
+void CheckImage(const torch::Tensor& t, int64_t channels, const char* name) {
+  CheckFloating(t, name);
+  if (t.dim() != 4 || (channels >= 0 && t.size(1) != channels)) {
+    throw std::invalid_argument(
+        std::string("dispmvs geometry: ") + name + " must be [B," +
+        (channels >= 0 ? std::to_string(channels) : std::string("N")) + ",H,W], got " +
+        std::to_string(t.dim()) + " dimensions" +
+        (t.dim() >= 2 ? ", " + std::to_string(t.size(1)) + " channels" : std::string()));
+  }
+}
+
+// [B,rows,cols]; returns B.
+int64_t CheckBatchedMatrix(const torch::Tensor& t, int64_t rows, int64_t cols, const char* name) {
+  CheckFloating(t, name);
+  const bool ok = (cols > 0) ? (t.dim() == 3 && t.size(1) == rows && t.size(2) == cols)
+                             : (t.dim() == 2 && t.size(1) == rows);
+  if (!ok) {
+    throw std::invalid_argument(std::string("dispmvs geometry: ") + name + " must be [B," +
+                                std::to_string(rows) +
+                                (cols > 0 ? "," + std::to_string(cols) : std::string()) + "]");
+  }
+  return t.size(0);
+}
+
+void CheckSameKind(const torch::Tensor& t, const torch::Tensor& reference, const char* name) {
+  if (t.scalar_type() != reference.scalar_type() || t.device() != reference.device()) {
+    throw std::invalid_argument(std::string("dispmvs geometry: ") + name +
+                                " must have the same dtype and device as the other inputs");
+  }
+}
+
+void CheckPair(const EpipolarPair& pair) {
+  CheckImage(pair.a, 3, "EpipolarPair::a");
+  CheckImage(pair.b, 3, "EpipolarPair::b");
+  CheckSameKind(pair.b, pair.a, "EpipolarPair::b");
+}
+
+torch::Tensor ZeroNonFinite(const torch::Tensor& t) {
+  return torch::where(torch::isfinite(t), t, torch::zeros_like(t));
+}
+
+// value > tol * scale, where `scale` is the sum of the magnitudes of the terms
+// that make up `value`: positive beyond rounding noise, unit-free.
+torch::Tensor IsClearlyPositive(const torch::Tensor& value, const torch::Tensor& scale,
+                                double tol) {
+  return value > scale * tol;
+}
+torch::Tensor IsClearlyNonZero(const torch::Tensor& value, const torch::Tensor& scale, double tol) {
+  return value.abs() > scale * tol;
+}
+
+torch::Tensor Channel(const torch::Tensor& t, int64_t c) { return t.slice(1, c, c + 1); }
+
+// One-element-per-batch parameter [B] viewed as [B,1,1,1] for broadcasting.
+torch::Tensor AsImageScalar(const torch::Tensor& t) { return t.reshape({-1, 1, 1, 1}); }
+
+// Pair coefficients with non-finite entries replaced by zero; a zeroed pixel
+// has a = 0, which every consumer below reads as degenerate.
+struct CleanPair {
+  torch::Tensor a_x, a_y, a_z, b_x, b_y, b_z;
+  explicit CleanPair(const EpipolarPair& pair) {
+    CheckPair(pair);
+    const torch::Tensor a = ZeroNonFinite(pair.a);
+    const torch::Tensor b = ZeroNonFinite(pair.b);
+    a_x = Channel(a, 0);
+    a_y = Channel(a, 1);
+    a_z = Channel(a, 2);
+    b_x = Channel(b, 0);
+    b_y = Channel(b, 1);
+    b_z = Channel(b, 2);
+  }
+};
+
+// The epipolar gradient g = b_xy a_z - a_xy b_z: dp_s/dw = g / (a_z + w b_z)^2,
+// so g points along the epipolar line towards larger w (nearer points).
+// It vanishes with the baseline (b = 0) and at the epipole (a parallel to b).
+struct EpipolarGradient {
+  torch::Tensor g_x, g_y;
+  torch::Tensor valid;  // [B,1,H,W]
+};
+EpipolarGradient ComputeEpipolarGradient(const CleanPair& p, double tol) {
+  EpipolarGradient out;
+  out.g_x = p.b_x * p.a_z - p.a_x * p.b_z;
+  out.g_y = p.b_y * p.a_z - p.a_y * p.b_z;
+  const torch::Tensor terms =
+      (p.b_x.abs() + p.b_y.abs()) * p.a_z.abs() + (p.a_x.abs() + p.a_y.abs()) * p.b_z.abs();
+  out.valid = IsClearlyPositive(out.g_x.abs() + out.g_y.abs(), terms, tol);
+  return out;
+}
+
+}  // namespace
+
+torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOptions& options) {
+  if (height <= 0 || width <= 0) {
+    throw std::invalid_argument("dispmvs geometry: PixelGrid needs a positive height and width");
+  }
+  const torch::Tensor rows = torch::arange(height, options);
+  const torch::Tensor cols = torch::arange(width, options);
+  const auto yx = torch::meshgrid({rows, cols}, "ij");
+  return torch::stack({yx[1], yx[0]}, 0).unsqueeze(0);  // (x, y) = (col, row)
+}
+
+EpipolarPair MakeEpipolarPair(const torch::Tensor& K_ref, const torch::Tensor& K_src,
+                              const torch::Tensor& R, const torch::Tensor& T, int64_t height,
+                              int64_t width) {
+  const int64_t batch_sizes[] = {
+      CheckBatchedMatrix(K_ref, 3, 3, "K_ref"), CheckBatchedMatrix(K_src, 3, 3, "K_src"),
+      CheckBatchedMatrix(R, 3, 3, "R"), CheckBatchedMatrix(T, 3, 0, "T")};
+  CheckSameKind(K_src, K_ref, "K_src");
+  CheckSameKind(R, K_ref, "R");
+  CheckSameKind(T, K_ref, "T");
+  int64_t batch = 1;
+  for (int64_t b : batch_sizes) batch = std::max(batch, b);
+  for (int64_t b : batch_sizes) {
+    if (b != 1 && b != batch) {
+      throw std::invalid_argument(
+          "dispmvs geometry: K_ref, K_src, R, T batch sizes must be equal (or 1)");
+    }
+  }
+
+  // linalg_inv_ex neither throws nor synchronises; a singular K_ref is
+  // reported in `info` and turned into degenerate (zero) coefficients below.
+  const auto [K_ref_inv, info] = torch::linalg_inv_ex(K_ref);
+  const torch::Tensor M = K_src.matmul(R).matmul(K_ref_inv).expand({batch, 3, 3});
+
+  const torch::Tensor grid = PixelGrid(height, width, K_ref.options()).reshape({2, -1});
+  const torch::Tensor homogeneous = torch::cat({grid, torch::ones_like(grid.slice(0, 0, 1))}, 0);
+  torch::Tensor a = M.matmul(homogeneous).reshape({batch, 3, height, width});
+  torch::Tensor b = K_src.matmul(T.unsqueeze(-1)).expand({batch, 3, 1}).reshape({batch, 3, 1, 1});
+
+  // Non-finite cameras are checked on the inputs, not only on a and b: an
+  // infinite focal length, say, inverts to a finite but meaningless matrix.
+  auto all_finite = [](const torch::Tensor& t) {
+    return torch::isfinite(t).flatten(1).all(1).reshape({-1, 1, 1, 1});
+  };
+  const torch::Tensor b_ok =
+      torch::isfinite(b).all(1, /*keepdim=*/true) & all_finite(K_src) & all_finite(T);
+  const torch::Tensor cameras_ok =
+      all_finite(K_ref) & all_finite(R) & (info == 0).reshape({-1, 1, 1, 1});
+  const torch::Tensor a_ok = torch::isfinite(a).all(1, /*keepdim=*/true) & b_ok & cameras_ok;
+  a = torch::where(a_ok, a, torch::zeros_like(a));
+  b = torch::where(b_ok, b, torch::zeros_like(b));
+  return {a, b};
+}
+
+SourcePixels ProjectInverseDepth(const EpipolarPair& pair, const torch::Tensor& inv_depth) {
+  const CleanPair p(pair);
+  CheckImage(inv_depth, 1, "inv_depth");
+  CheckSameKind(inv_depth, pair.a, "inv_depth");
+  const double tol = RelativeTolerance(inv_depth.scalar_type());
+
+  const torch::Tensor w_ok = torch::isfinite(inv_depth) & (inv_depth >= 0);
+  const torch::Tensor w = torch::where(w_ok, inv_depth, torch::zeros_like(inv_depth));
+
+  // Homogeneous source pixel; its z is z_src / z_ref, positive in front of the
+  // source camera.
+  const torch::Tensor num_x = p.a_x + w * p.b_x;
+  const torch::Tensor num_y = p.a_y + w * p.b_y;
+  const torch::Tensor den = p.a_z + w * p.b_z;
+  const torch::Tensor in_front = IsClearlyPositive(den, p.a_z.abs() + (w * p.b_z).abs(), tol);
+  const torch::Tensor representable =
+      torch::max(num_x.abs(), num_y.abs()) < den.abs() * kMaxPixelCoordinate;
+  const torch::Tensor valid = w_ok & in_front & representable;
+
+  const torch::Tensor safe_den = torch::where(valid, den, torch::ones_like(den));
+  const torch::Tensor xy = torch::cat({num_x, num_y}, 1) / safe_den;
+  return {torch::where(valid, xy, torch::zeros_like(xy)), valid};
+}
+
+EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair) {
+  const CleanPair p(pair);
+  const EpipolarGradient g = ComputeEpipolarGradient(p, RelativeTolerance(pair.a.scalar_type()));
+
+  // Normalise in two steps, first by the larger component, so that squaring
+  // cannot overflow or underflow whatever the scene unit. The first step is
+  // detached: g / |g| does not depend on it, and it keeps max() out of the graph.
+  const torch::Tensor largest = torch::max(g.g_x.abs(), g.g_y.abs()).detach();
+  const torch::Tensor safe_largest = torch::where(g.valid, largest, torch::ones_like(largest));
+  const torch::Tensor ux = torch::where(g.valid, g.g_x / safe_largest, torch::ones_like(largest));
+  const torch::Tensor uy = torch::where(g.valid, g.g_y / safe_largest, torch::zeros_like(largest));
+  const torch::Tensor norm = torch::sqrt(ux * ux + uy * uy);  // >= 1: the larger component is +-1
+  const torch::Tensor dir = torch::cat({ux, uy}, 1) / norm;
+  return {torch::where(g.valid, dir, torch::zeros_like(dir)), g.valid};
+}
+
+InverseDepth TriangulateInverseDepth(const EpipolarPair& pair, const torch::Tensor& src_xy) {
+  const CleanPair p(pair);
+  CheckImage(src_xy, 2, "src_xy");
+  CheckSameKind(src_xy, pair.a, "src_xy");
+  const double tol = RelativeTolerance(src_xy.scalar_type());
+
+  const torch::Tensor xy_ok = torch::isfinite(src_xy).all(1, /*keepdim=*/true);
+  const torch::Tensor xy = ZeroNonFinite(src_xy);
+  const torch::Tensor u = Channel(xy, 0);
+  const torch::Tensor v = Channel(xy, 1);
+
+  // u (a_z + w b_z) = a_x + w b_x  =>  w = (a_x - u a_z) / (u b_z - b_x); same for v.
+  const torch::Tensor num_x = p.a_x - u * p.a_z;
+  const torch::Tensor den_x = u * p.b_z - p.b_x;
+  const torch::Tensor num_y = p.a_y - v * p.a_z;
+  const torch::Tensor den_y = v * p.b_z - p.b_y;
+
+  // Which equation: at the true match, u b_z - b_x = -g_x / (a_z + w b_z) and
+  // v b_z - b_y = -g_y / (a_z + w b_z) with the epipolar gradient g (see
+  // ComputeEpipolarGradient), so the denominators are the epipolar direction
+  // scaled by one common factor. The larger |denominator| is therefore the
+  // larger flow component (the paper's Eq. 7), and the better conditioned one.
+  const torch::Tensor use_x = den_x.abs() >= den_y.abs();
+  const torch::Tensor num = torch::where(use_x, num_x, num_y);
+  const torch::Tensor den = torch::where(use_x, den_x, den_y);
+  const torch::Tensor num_terms =
+      torch::where(use_x, p.a_x.abs() + (u * p.a_z).abs(), p.a_y.abs() + (v * p.a_z).abs());
+  const torch::Tensor den_terms =
+      torch::where(use_x, (u * p.b_z).abs() + p.b_x.abs(), (v * p.b_z).abs() + p.b_y.abs());
+
+  // den ~ 0: zero baseline, or the match sits on the epipole. num ~ 0: the match
+  // is the vanishing point, w = 0 (infinitely far, depth undefined).
+  // num / den < 0: the point is behind the reference camera.
+  const torch::Tensor solvable = xy_ok & ComputeEpipolarGradient(p, tol).valid &
+                                 IsClearlyNonZero(den, den_terms, tol) &
+                                 IsClearlyNonZero(num, num_terms, tol) & ((num > 0) == (den > 0));
+  const torch::Tensor safe_den = torch::where(solvable, den, torch::ones_like(den));
+  const torch::Tensor w_raw = num / safe_den;
+  const torch::Tensor w_finite = solvable & torch::isfinite(w_raw);
+  const torch::Tensor w = torch::where(w_finite, w_raw, torch::zeros_like(w_raw));
+
+  // Also in front of the source camera (the match could be the mirror image of
+  // a point behind it).
+  const torch::Tensor in_front =
+      IsClearlyPositive(p.a_z + w * p.b_z, p.a_z.abs() + (w * p.b_z).abs(), tol);
+  const torch::Tensor valid = w_finite & in_front;
+  return {torch::where(valid, w, torch::zeros_like(w)), valid};
+}
+
+torch::Tensor EflowToSourcePixel(const torch::Tensor& base_xy, const torch::Tensor& dir,
+                                 const torch::Tensor& eflow) {
+  CheckImage(base_xy, 2, "base_xy");
+  CheckImage(dir, 2, "dir");
+  CheckImage(eflow, 1, "eflow");
+  return ZeroNonFinite(base_xy) + ZeroNonFinite(eflow) * ZeroNonFinite(dir);
+}
+
+torch::Tensor SourcePixelToEflow(const torch::Tensor& base_xy, const torch::Tensor& dir,
+                                 const torch::Tensor& src_xy) {
+  CheckImage(base_xy, 2, "base_xy");
+  CheckImage(dir, 2, "dir");
+  CheckImage(src_xy, 2, "src_xy");
+  // Projection onto the (unit) direction: exact inverse of EflowToSourcePixel
+  // for pixels on the line; off the line it keeps the along-line component.
+  return (ZeroNonFinite(dir) * (ZeroNonFinite(src_xy) - ZeroNonFinite(base_xy)))
+      .sum(1, /*keepdim=*/true);
+}
+
+FusedInverseDepth FuseInverseDepths(const torch::Tensor& inv_depths, const torch::Tensor& logits,
+                                    const torch::Tensor& valid) {
+  CheckImage(inv_depths, -1, "inv_depths");
+  CheckImage(logits, -1, "logits");
+  if (!valid.defined() || valid.scalar_type() != torch::kBool) {
+    throw std::invalid_argument("dispmvs geometry: FuseInverseDepths needs a bool valid mask");
+  }
+  if (logits.sizes() != inv_depths.sizes() || valid.sizes() != inv_depths.sizes()) {
+    throw std::invalid_argument(
+        "dispmvs geometry: inv_depths, logits and valid must all be [B,N,H,W]");
+  }
+  CheckSameKind(logits, inv_depths, "logits");
+
+  const torch::Tensor usable = valid & torch::isfinite(inv_depths) & torch::isfinite(logits);
+  const torch::Tensor any_usable = usable.any(1, /*keepdim=*/true);
+
+  // Softmax restricted to usable pairs. The shift by the largest usable logit
+  // is detached (softmax does not depend on it) and is 0 where none is usable;
+  // unusable entries enter exp() as 0, never as a huge difference that would
+  // overflow in the (masked) backward pass.
+  const torch::Tensor shift_raw =
+      torch::where(usable, logits.detach(), -std::numeric_limits<double>::infinity())
+          .amax(1, /*keepdim=*/true);
+  const torch::Tensor shift =
+      torch::where(any_usable, shift_raw, torch::zeros_like(shift_raw)).detach();
+  const torch::Tensor exponent = torch::where(usable, logits - shift, torch::zeros_like(logits));
+  const torch::Tensor unnormalised =
+      torch::where(usable, torch::exp(exponent), torch::zeros_like(logits));
+  const torch::Tensor total = unnormalised.sum(1, /*keepdim=*/true);  // >= 1 where any usable
+  const torch::Tensor safe_total = torch::where(any_usable, total, torch::ones_like(total));
+  const torch::Tensor weights = unnormalised / safe_total;
+
+  const torch::Tensor depths = torch::where(usable, inv_depths, torch::zeros_like(inv_depths));
+  const torch::Tensor fused = (weights * depths).sum(1, /*keepdim=*/true);
+  return {fused, weights, any_usable};
+}
+
+namespace {
+
+// Checks a per-sample depth range: [B] tensors with 0 < d_min <= d_max
+// (d_max may be +inf: no far limit). Synchronises with the device once.
+void CheckDepthRange(const torch::Tensor& d_min, const torch::Tensor& d_max, bool strict) {
+  CheckFloating(d_min, "d_min");
+  CheckFloating(d_max, "d_max");
+  CheckSameKind(d_max, d_min, "d_max");
+  if (d_min.dim() != 1 || d_max.sizes() != d_min.sizes()) {
+    throw std::invalid_argument("dispmvs geometry: d_min and d_max must both be [B]");
+  }
+  const torch::Tensor ordered = strict ? (d_max > d_min) : (d_max >= d_min);
+  const bool ok = (torch::isfinite(d_min) & (d_min > 0) & ordered).all().item<bool>();
+  if (!ok) {
+    throw std::invalid_argument(
+        std::string("dispmvs geometry: depth range must satisfy 0 < d_min ") +
+        (strict ? "< " : "<= ") + "d_max, d_min finite");
+  }
+}
+
+}  // namespace
+
+torch::Tensor RandomInverseDepth(const torch::Tensor& d_min, const torch::Tensor& d_max,
+                                 int64_t height, int64_t width, torch::Generator generator) {
+  CheckDepthRange(d_min, d_max, /*strict=*/false);
+  if (height <= 0 || width <= 0) {
+    throw std::invalid_argument("dispmvs geometry: RandomInverseDepth needs a positive size");
+  }
+  const std::vector<int64_t> shape = {d_min.size(0), 1, height, width};
+  torch::Tensor unit;
+  if (generator.defined()) {
+    // Draw on the generator's device so a given seed gives the same numbers
+    // wherever the result lives.
+    unit = torch::rand(shape, generator, d_min.options().device(generator.device()))
+               .to(d_min.device());
+  } else {
+    unit = torch::rand(shape, d_min.options());
+  }
+  const torch::Tensor w_far = AsImageScalar(d_max.reciprocal());
+  const torch::Tensor w_near = AsImageScalar(d_min.reciprocal());
+  return w_far + unit * (w_near - w_far);
+}
+
+torch::Tensor NormalizeInverseDepth(const torch::Tensor& inv_depth, const torch::Tensor& d_min,
+                                    const torch::Tensor& d_max) {
+  CheckImage(inv_depth, -1, "inv_depth");
+  CheckDepthRange(d_min, d_max, /*strict=*/true);
+  // The range is a hint; the result keeps inv_depth's dtype and device.
+  const torch::Tensor w_far = AsImageScalar(d_max.reciprocal()).to(inv_depth.options());
+  const torch::Tensor w_near = AsImageScalar(d_min.reciprocal()).to(inv_depth.options());
+  return (inv_depth - w_far) / (w_near - w_far);
+}
+
+torch::Tensor DenormalizeInverseDepth(const torch::Tensor& normalized, const torch::Tensor& d_min,
+                                      const torch::Tensor& d_max) {
+  CheckImage(normalized, -1, "normalized");
+  CheckDepthRange(d_min, d_max, /*strict=*/true);
+  const torch::Tensor w_far = AsImageScalar(d_max.reciprocal()).to(normalized.options());
+  const torch::Tensor w_near = AsImageScalar(d_min.reciprocal()).to(normalized.options());
+  return w_far + normalized * (w_near - w_far);
+}
+
+torch::Tensor ScaleIntrinsics(const torch::Tensor& K, double factor) {
+  CheckFloating(K, "K");
+  if (K.dim() < 2 || K.size(-1) != 3 || K.size(-2) != 3) {
+    throw std::invalid_argument("dispmvs geometry: ScaleIntrinsics needs [...,3,3] matrices");
+  }
+  if (!std::isfinite(factor) || factor <= 0) {
+    throw std::invalid_argument("dispmvs geometry: ScaleIntrinsics factor must be finite and > 0");
+  }
+  // The pixel-index map x' = (x + 0.5) / factor - 0.5 as a homogeneous matrix
+  // applied to the image side of K: f' = f / factor, c' = (c + 0.5) / factor - 0.5.
+  const double s = 1.0 / factor;
+  const double shift = 0.5 * s - 0.5;
+  const torch::Tensor S = torch::tensor({s, 0.0, shift, 0.0, s, shift, 0.0, 0.0, 1.0},
+                                        torch::TensorOptions().dtype(torch::kFloat64))
+                              .reshape({3, 3})
+                              .to(K.options());
+  return S.matmul(K);
+}
+
+}  // namespace dispmvs::model

@@ -16,9 +16,15 @@
 //
 // With a = K_s R K_r^-1 p~ and b = K_s T, the source pixel of reference pixel p
 // at inverse depth w is  p_s(w) = (a_xy + w b_xy) / (a_z + w b_z).
-// Every function returns finite values everywhere; where the geometry is
-// degenerate (zero baseline, epipole, behind a camera, non-finite input) the
-// returned `valid` mask is false.
+// Every function returns finite values everywhere, and finite gradients with
+// respect to inverse depth, source pixels, E-flows and logits; where the
+// geometry is degenerate (zero baseline, epipole, behind a camera, non-finite
+// input) the returned `valid` mask is false and the value is 0.
+// "Degenerate" is decided relative to the magnitudes of the terms involved
+// (tolerance sqrt(machine epsilon) of the dtype), so the masks do not depend
+// on the unit of the scene: millimetres and kilometres give the same masks.
+// float32 and float64 both work; tensors may live on any device (all inputs of
+// one call on the same device, with the same dtype).
 
 #include <torch/torch.h>
 
@@ -30,9 +36,14 @@ struct EpipolarPair {
   torch::Tensor b;  // [B,3,1,1]  K_s T
 };
 
-// Pixel-centre grid [1,2,H,W] holding (x, y) = (col, row).
+// Pixel-centre grid [1,2,H,W] holding (x, y) = (col, row). Throws
+// std::invalid_argument unless height, width > 0.
 torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOptions& options);
 
+// Batch sizes may be B or 1 (broadcast). Throws std::invalid_argument on bad
+// shapes or mixed dtypes/devices. Cameras with non-finite entries or a
+// singular K_ref give a = 0 (and b = 0 where K_src or T is the culprit): every
+// function below reads that as degenerate.
 EpipolarPair MakeEpipolarPair(const torch::Tensor& K_ref, const torch::Tensor& K_src,
                               const torch::Tensor& R, const torch::Tensor& T,
                               int64_t height, int64_t width);
@@ -42,6 +53,9 @@ struct SourcePixels {
   torch::Tensor valid;  // [B,1,H,W] bool: w finite and >= 0, point in front of the source camera
 };
 // Source pixel of every reference pixel at inverse depth w [B,1,H,W].
+// w = 0 is valid: it projects to the vanishing point a_xy / a_z when that lies
+// in front of the source camera. Also invalid: projections more than 2^24
+// pixels away (no image is that large; keeps quotients away from overflow).
 SourcePixels ProjectInverseDepth(const EpipolarPair& pair, const torch::Tensor& inv_depth);
 
 struct EpipolarDirection {
@@ -60,19 +74,24 @@ struct InverseDepth {
 // Closed-form triangulation of the matched source pixel xy [B,2,H,W]:
 //   w = (a_x - u a_z) / (u b_z - b_x)   or   w = (a_y - v a_z) / (v b_z - b_y),
 // taking the equation with the larger denominator (the paper's Eq. 7
-// selection by the larger flow component).
+// selection by the larger flow component). Also invalid: a match at the
+// vanishing point (w = 0), a pixel or match on the epipole, zero baseline,
+// non-finite coordinates.
 InverseDepth TriangulateInverseDepth(const EpipolarPair& pair, const torch::Tensor& src_xy);
 
-// E-flow <-> source pixel, for a base point and direction held fixed within a stage.
+// E-flow <-> source pixel, for a base point and direction held fixed within a stage:
+// src = base + e * dir and e = dir . (src - base) (exact inverses for unit dir
+// and src on the line). Non-finite inputs are read as 0.
 torch::Tensor EflowToSourcePixel(const torch::Tensor& base_xy, const torch::Tensor& dir,
                                  const torch::Tensor& eflow /*[B,1,H,W]*/);
 torch::Tensor SourcePixelToEflow(const torch::Tensor& base_xy, const torch::Tensor& dir,
                                  const torch::Tensor& src_xy);
 
 // Softmax-weighted fusion over the source axis: inv_depths, logits, valid are
-// [B,N,H,W]; invalid pairs get zero weight. Returns fused inverse depth
+// [B,N,H,W] (valid is bool); invalid pairs, and pairs with a non-finite inverse
+// depth or logit, get zero weight. Returns fused inverse depth
 // [B,1,H,W], the weights [B,N,H,W], and a mask [B,1,H,W] of pixels with at
-// least one valid pair.
+// least one valid pair (elsewhere weights and fused value are 0).
 struct FusedInverseDepth {
   torch::Tensor inv_depth;
   torch::Tensor weights;
@@ -82,19 +101,26 @@ FusedInverseDepth FuseInverseDepths(const torch::Tensor& inv_depths, const torch
                                     const torch::Tensor& valid);
 
 // Uniform random inverse depth in [1/d_max, 1/d_min]; d_min, d_max are [B]
-// tensors (per-sample range hint). Shape [B,1,H,W].
+// tensors (per-sample range hint), 0 < d_min <= d_max, d_max may be +inf
+// (otherwise std::invalid_argument). Shape [B,1,H,W], dtype and device of
+// d_min. A defined generator makes it deterministic: the numbers are drawn on
+// the generator's device, so a CPU generator gives the same values for CPU
+// and CUDA results.
 torch::Tensor RandomInverseDepth(const torch::Tensor& d_min, const torch::Tensor& d_max,
                                  int64_t height, int64_t width, torch::Generator generator = {});
 
 // (w - 1/d_max) / (1/d_min - 1/d_max): 0 at d_max, 1 at d_min. Not clipped:
-// values outside the hint stay valid. d_min, d_max are [B] tensors.
+// values outside the hint stay valid. d_min, d_max are [B] tensors with
+// 0 < d_min < d_max (d_max may be +inf), otherwise std::invalid_argument.
+// The result has the dtype and device of the first argument.
 torch::Tensor NormalizeInverseDepth(const torch::Tensor& inv_depth, const torch::Tensor& d_min,
                                     const torch::Tensor& d_max);
 torch::Tensor DenormalizeInverseDepth(const torch::Tensor& normalized, const torch::Tensor& d_min,
                                       const torch::Tensor& d_max);
 
 // Intrinsics of a stage at 1/factor resolution, in the pixel-index convention:
-// c' = (c + 0.5) / factor - 0.5, f' = f / factor.
+// c' = (c + 0.5) / factor - 0.5, f' = f / factor. K is [...,3,3]; factor > 0
+// is the downsampling factor (4, 16).
 torch::Tensor ScaleIntrinsics(const torch::Tensor& K, double factor);
 
 }  // namespace dispmvs::model
