@@ -1,0 +1,193 @@
+#include "model/correlation.h"
+
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+namespace dispmvs::model {
+namespace {
+
+// A plain [C][H][W] image of one batch entry, for the naive reference.
+struct Map {
+  int64_t c = 0, h = 0, w = 0;
+  std::vector<double> v;
+  double at(int64_t ch, int64_t y, int64_t x) const { return v[(ch * h + y) * w + x]; }
+};
+
+Map ToMap(const torch::Tensor& t, int64_t b) {
+  Map m;
+  m.c = t.size(1);
+  m.h = t.size(2);
+  m.w = t.size(3);
+  auto a = t.accessor<float, 4>();
+  for (int64_t c = 0; c < m.c; ++c)
+    for (int64_t y = 0; y < m.h; ++y)
+      for (int64_t x = 0; x < m.w; ++x) m.v.push_back(a[b][c][y][x]);
+  return m;
+}
+
+// 2x2 average pooling; a block cut by the border averages the pixels it has.
+Map Pool(const Map& in) {
+  Map out;
+  out.c = in.c;
+  out.h = (in.h + 1) / 2;
+  out.w = (in.w + 1) / 2;
+  for (int64_t c = 0; c < out.c; ++c)
+    for (int64_t y = 0; y < out.h; ++y)
+      for (int64_t x = 0; x < out.w; ++x) {
+        double sum = 0;
+        int count = 0;
+        for (int64_t dy = 0; dy < 2; ++dy)
+          for (int64_t dx = 0; dx < 2; ++dx)
+            if (2 * y + dy < in.h && 2 * x + dx < in.w) {
+              sum += in.at(c, 2 * y + dy, 2 * x + dx);
+              ++count;
+            }
+        out.v.push_back(sum / count);
+      }
+  return out;
+}
+
+// Bilinear interpolation at pixel-index position (x, y); pixels outside the
+// map read 0.
+double Bilinear(const Map& m, int64_t c, double x, double y) {
+  const double x0 = std::floor(x), y0 = std::floor(y);
+  double sum = 0;
+  for (int dy = 0; dy < 2; ++dy)
+    for (int dx = 0; dx < 2; ++dx) {
+      const int64_t xi = static_cast<int64_t>(x0) + dx;
+      const int64_t yi = static_cast<int64_t>(y0) + dy;
+      if (xi < 0 || yi < 0 || xi >= m.w || yi >= m.h) continue;
+      const double wx = dx ? x - x0 : 1 - (x - x0);
+      const double wy = dy ? y - y0 : 1 - (y - y0);
+      sum += wx * wy * m.at(c, yi, xi);
+    }
+  return sum;
+}
+
+TEST(EpipolarCorrelationTest, MatchesNaivePerPixelLoop) {
+  torch::manual_seed(7);
+  const int64_t B = 2, C = 3, H = 7, W = 6, h = 4, w = 5, levels = 3, samples = 5;
+  const torch::Tensor source = torch::randn({B, C, H, W});
+  const torch::Tensor ref = torch::randn({B, C, h, w});
+  const torch::Tensor base = torch::rand({B, 2, h, w}) * 10.0 - 2.0;  // some outside
+  const torch::Tensor angle = torch::rand({B, 1, h, w}) * 6.283;
+  torch::Tensor dir = torch::cat({torch::cos(angle), torch::sin(angle)}, 1);
+  dir.index_put_({0, torch::indexing::Slice(), 1, 1}, 0.0);  // a degenerate pixel
+  const torch::Tensor eflow = torch::rand({B, 1, h, w}) * 4.0 - 2.0;
+
+  const EpipolarCorrelation corr(source, levels, samples);
+  ASSERT_EQ(corr.levels(), levels);
+  ASSERT_EQ(corr.channels(), levels * samples);
+  const CorrelationSamples out = corr.Lookup(ref, base, dir, eflow);
+  ASSERT_EQ(out.cost.sizes(), torch::IntArrayRef({B, levels * samples, h, w}));
+  ASSERT_EQ(out.inside.sizes(), out.cost.sizes());
+
+  auto cost = out.cost.accessor<float, 4>();
+  auto inside = out.inside.accessor<bool, 4>();
+  auto bxy = base.accessor<float, 4>();
+  auto d = dir.accessor<float, 4>();
+  auto e = eflow.accessor<float, 4>();
+  int outside_count = 0;
+  for (int64_t b = 0; b < B; ++b) {
+    std::vector<Map> pyramid{ToMap(source, b)};
+    for (int64_t l = 1; l < levels; ++l) pyramid.push_back(Pool(pyramid.back()));
+    const Map r = ToMap(ref, b);
+    for (int64_t y = 0; y < h; ++y)
+      for (int64_t x = 0; x < w; ++x) {
+        const double mx = bxy[b][0][y][x] + d[b][0][y][x] * e[b][0][y][x];
+        const double my = bxy[b][1][y][x] + d[b][1][y][x] * e[b][0][y][x];
+        for (int64_t l = 0; l < levels; ++l) {
+          const double s = std::pow(2.0, static_cast<double>(l));
+          for (int64_t k = 0; k < samples; ++k) {
+            const double o = static_cast<double>(k) - (samples - 1) / 2.0;
+            const double px = (mx + 0.5) / s - 0.5 + o * d[b][0][y][x];
+            const double py = (my + 0.5) / s - 0.5 + o * d[b][1][y][x];
+            double dot = 0;
+            for (int64_t c = 0; c < C; ++c) dot += r.at(c, y, x) * Bilinear(pyramid[l], c, px, py);
+            const int64_t ch = l * samples + k;
+            EXPECT_NEAR(cost[b][ch][y][x], dot / C, 1e-5) << b << " " << ch << " " << y << " " << x;
+            const bool in = px >= 0 && py >= 0 && px <= pyramid[l].w - 1 && py <= pyramid[l].h - 1;
+            EXPECT_EQ(inside[b][ch][y][x], in);
+            outside_count += in ? 0 : 1;
+          }
+        }
+      }
+  }
+  EXPECT_GT(outside_count, 0);  // the test did exercise the border
+}
+
+// A ramp f(x, y) = x makes the cost the x coordinate (in stage pixels) of the
+// sample: checks the centre, the one-pixel spacing and its 2^level growth.
+TEST(EpipolarCorrelationTest, SampleSpacingIsOnePixelOfEachLevel) {
+  const int64_t W = 16, H = 4;
+  const torch::Tensor ramp =
+      torch::arange(W, torch::kFloat).view({1, 1, 1, W}).expand({1, 1, H, W}).contiguous();
+  const EpipolarCorrelation corr(ramp, /*levels=*/2, /*samples=*/3);
+  const torch::Tensor ref = torch::ones({1, 1, 1, 1});
+  const torch::Tensor base = torch::tensor({3.0f, 1.0f}).view({1, 2, 1, 1});
+  const torch::Tensor dir = torch::tensor({1.0f, 0.0f}).view({1, 2, 1, 1});
+  const torch::Tensor eflow = torch::full({1, 1, 1, 1}, 4.5f);  // match at x = 7.5
+  const torch::Tensor cost = corr.Lookup(ref, base, dir, eflow).cost.flatten();
+  // Level 0: 7.5 + {-1, 0, 1}. Level 1 (pooled ramp: 2j + 0.5): 7.5 + {-2, 0, 2}.
+  const std::vector<float> expected{6.5f, 7.5f, 8.5f, 5.5f, 7.5f, 9.5f};
+  for (size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_NEAR(cost[static_cast<int64_t>(i)].item<float>(), expected[i], 1e-5) << i;
+  }
+}
+
+TEST(EpipolarCorrelationTest, OutsideSamplesReadZeroAndAreReported) {
+  const torch::Tensor ones = torch::ones({1, 2, 4, 4});
+  const EpipolarCorrelation corr(ones, 1, 3);
+  const torch::Tensor ref = torch::ones({1, 2, 1, 1});
+  const torch::Tensor dir = torch::tensor({1.0f, 0.0f}).view({1, 2, 1, 1});
+  const torch::Tensor eflow = torch::zeros({1, 1, 1, 1});
+  // Samples at x = -1.5, -0.5, 0.5 on row 2: outside, half outside, inside.
+  const torch::Tensor base = torch::tensor({-0.5f, 2.0f}).view({1, 2, 1, 1});
+  const CorrelationSamples out = corr.Lookup(ref, base, dir, eflow);
+  EXPECT_NEAR(out.cost[0][0][0][0].item<float>(), 0.0f, 1e-6);
+  EXPECT_NEAR(out.cost[0][1][0][0].item<float>(), 0.5f, 1e-6);
+  EXPECT_NEAR(out.cost[0][2][0][0].item<float>(), 1.0f, 1e-6);
+  EXPECT_FALSE(out.inside[0][0][0][0].item<bool>());
+  EXPECT_FALSE(out.inside[0][1][0][0].item<bool>());
+  EXPECT_TRUE(out.inside[0][2][0][0].item<bool>());
+
+  // Far away and non-finite positions read exactly 0, never NaN.
+  const torch::Tensor far = torch::tensor({1e30f, std::nanf("")}).view({1, 2, 1, 1});
+  const torch::Tensor far_cost = corr.Lookup(ref, far, dir, eflow).cost;
+  EXPECT_TRUE(torch::all(far_cost == 0).item<bool>());
+}
+
+TEST(EpipolarCorrelationTest, GradientReachesEflowAndFeatures) {
+  const torch::Tensor ramp = torch::arange(8, torch::kFloat).view({1, 1, 1, 8}).expand({1, 1, 8, 8}).contiguous();
+  torch::Tensor src = ramp.clone().requires_grad_(true);
+  const EpipolarCorrelation corr(src, 2, 3);
+  const torch::Tensor ref = torch::full({1, 1, 1, 1}, 2.0f).requires_grad_(true);
+  const torch::Tensor base = torch::tensor({3.25f, 3.0f}).view({1, 2, 1, 1});
+  const torch::Tensor dir = torch::tensor({0.6f, 0.8f}).view({1, 2, 1, 1});
+  torch::Tensor eflow = torch::zeros({1, 1, 1, 1}).requires_grad_(true);
+  // Level-0 centre sample: cost = 2 * x = 2 * (3.25 + 0.6 e); d/de = 1.2.
+  corr.Lookup(ref, base, dir, eflow).cost[0][1][0][0].backward();
+  EXPECT_NEAR(eflow.grad().item<float>(), 1.2f, 1e-5);
+  EXPECT_NEAR(ref.grad().item<float>(), 3.25f, 1e-5);
+  EXPECT_GT(src.grad().abs().sum().item<float>(), 0.0f);
+}
+
+TEST(EpipolarCorrelationTest, RejectsBadInput) {
+  EXPECT_THROW(EpipolarCorrelation(torch::zeros({2, 3, 4}), 1, 3), std::invalid_argument);
+  EXPECT_THROW(EpipolarCorrelation(torch::zeros({1, 3, 4, 4}), 0, 3), std::invalid_argument);
+  EXPECT_THROW(EpipolarCorrelation(torch::zeros({1, 3, 4, 4}), 2, 0), std::invalid_argument);
+  const EpipolarCorrelation corr(torch::zeros({1, 3, 4, 4}), 2, 3);
+  const torch::Tensor xy = torch::zeros({1, 2, 2, 2});
+  const torch::Tensor e = torch::zeros({1, 1, 2, 2});
+  EXPECT_THROW(corr.Lookup(torch::zeros({1, 4, 2, 2}), xy, xy, e), std::invalid_argument);
+  EXPECT_THROW(corr.Lookup(torch::zeros({1, 3, 2, 2}), torch::zeros({1, 2, 2, 3}), xy, e),
+               std::invalid_argument);
+  EXPECT_THROW(corr.Lookup(torch::zeros({1, 3, 2, 2}), xy, xy, torch::zeros({1, 2, 2, 2})),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace dispmvs::model

@@ -1,0 +1,356 @@
+#include "model/dispmvs_net.h"
+
+#include <stdexcept>
+#include <string>
+
+#include "model/convex_upsample.h"
+#include "model/correlation.h"
+#include "model/geometry.h"
+
+namespace dispmvs::model {
+namespace {
+
+namespace F = torch::nn::functional;
+
+// A map and the mask of where it holds a value.
+struct MaskedMap {
+  torch::Tensor value;  // [B,C,H,W], 0 where invalid
+  torch::Tensor valid;  // [B,1,H,W] bool
+};
+
+// Upsamples a masked map with a linear upsampling operator `up` (convex or
+// bilinear) so that invalid pixels do not leak into valid ones: the result is
+// up(value * valid) / up(valid), valid where more than half of the
+// interpolation weight came from valid pixels. Without the renormalisation an
+// invalid neighbour (value 0, i.e. a point at infinity) would drag the
+// inverse depth of its valid neighbours towards 0.
+template <typename Up>
+MaskedMap UpsampleMasked(const MaskedMap& in, Up up) {
+  const torch::Tensor valid_f = in.valid.to(in.value.scalar_type());
+  const torch::Tensor numerator = up(in.value * valid_f);
+  const torch::Tensor weight = up(valid_f);
+  MaskedMap out;
+  out.valid = weight > 0.5;
+  out.value = torch::where(out.valid, numerator / weight.clamp_min(0.5),
+                           torch::zeros_like(numerator));
+  return out;
+}
+
+MaskedMap ConvexUp(const MaskedMap& in, const torch::Tensor& mask_logits, int64_t factor) {
+  return UpsampleMasked(in, [&](const torch::Tensor& x) {
+    return ConvexUpsample(x, mask_logits, factor);
+  });
+}
+
+// Bilinear x factor; align_corners=false is exactly the pixel-index
+// convention under integer scaling (fine pixel centre (c + 0.5) * f - 0.5).
+MaskedMap BilinearUp(const MaskedMap& in, int64_t factor) {
+  return UpsampleMasked(in, [&](const torch::Tensor& x) {
+    return F::interpolate(x, F::InterpolateFuncOptions()
+                                 .size(std::vector<int64_t>{x.size(2) * factor,
+                                                            x.size(3) * factor})
+                                 .mode(torch::kBilinear)
+                                 .align_corners(false));
+  });
+}
+
+torch::Tensor Crop(const torch::Tensor& x, int64_t height, int64_t width) {
+  return x.narrow(2, 0, height).narrow(3, 0, width);
+}
+
+// [B, ...] -> [B*N, ...], each batch entry repeated for its N sources
+// (index b*N + i), matching the layout of the batched source views.
+torch::Tensor RepeatPerSource(const torch::Tensor& x, int64_t sources) {
+  std::vector<int64_t> expanded{x.size(0), sources};
+  std::vector<int64_t> flat{x.size(0) * sources};
+  for (int64_t d = 1; d < x.dim(); ++d) {
+    expanded.push_back(x.size(d));
+    flat.push_back(x.size(d));
+  }
+  return x.unsqueeze(1).expand(expanded).reshape(flat);
+}
+
+std::string ShapeOf(const torch::Tensor& t) {
+  if (!t.defined()) return "undefined";
+  std::string s = "[";
+  for (int64_t d = 0; d < t.dim(); ++d) {
+    if (d > 0) s += ",";
+    s += std::to_string(t.size(d));
+  }
+  return s + "]";
+}
+
+void CheckInput(const DispMvsInput& in) {
+  const auto fail = [](const std::string& what) {
+    throw std::invalid_argument("DispMvsNet: " + what);
+  };
+  const torch::Tensor& img = in.images;
+  if (!img.defined() || img.dim() != 5 || img.size(0) < 1 || img.size(2) != 3 ||
+      img.size(3) < 1 || img.size(4) < 1 || !img.is_floating_point()) {
+    fail("images must be a floating-point [B,V,3,H,W] tensor, got " + ShapeOf(img));
+  }
+  const int64_t batch = img.size(0);
+  const int64_t views = img.size(1);
+  if (views < 2) fail("need a reference and at least one source view, got V = " +
+                      std::to_string(views));
+  const auto check = [&](const torch::Tensor& t, const char* name,
+                         std::vector<int64_t> expected) {
+    if (!t.defined() || t.sizes() != torch::IntArrayRef(expected)) {
+      std::string e = "[";
+      for (size_t i = 0; i < expected.size(); ++i) {
+        e += (i ? "," : "") + std::to_string(expected[i]);
+      }
+      fail(std::string(name) + " must be " + e + "], got " + ShapeOf(t));
+    }
+    if (!torch::isfinite(t).all().item<bool>()) fail(std::string(name) + " has non-finite values");
+  };
+  check(in.intrinsics, "intrinsics", {batch, views, 3, 3});
+  check(in.extrinsics, "extrinsics", {batch, views, 4, 4});
+  check(in.depth_min, "depth_min", {batch});
+  check(in.depth_max, "depth_max", {batch});
+  if (!(in.depth_min > 0).all().item<bool>() ||
+      !(in.depth_max > in.depth_min).all().item<bool>()) {
+    fail("the depth range must satisfy 0 < depth_min < depth_max");
+  }
+}
+
+}  // namespace
+
+RelativePoses ReferenceToSourcePoses(const torch::Tensor& extrinsics) {
+  if (!extrinsics.defined() || extrinsics.dim() != 4 || extrinsics.size(1) < 2 ||
+      extrinsics.size(2) != 4 || extrinsics.size(3) != 4) {
+    throw std::invalid_argument("ReferenceToSourcePoses: extrinsics must be [B,V,4,4], V >= 2, got " +
+                                ShapeOf(extrinsics));
+  }
+  const int64_t n = extrinsics.size(1) - 1;
+  // X_s = R_s X_w + T_s and X_w = R_r^T (X_r - T_r).
+  const torch::Tensor R_all = extrinsics.narrow(2, 0, 3).narrow(3, 0, 3);  // [B,V,3,3]
+  const torch::Tensor T_all = extrinsics.narrow(2, 0, 3).select(3, 3);     // [B,V,3]
+  const torch::Tensor R_ref = R_all.select(1, 0).unsqueeze(1);              // [B,1,3,3]
+  const torch::Tensor T_ref = T_all.select(1, 0).unsqueeze(1);              // [B,1,3]
+  RelativePoses poses;
+  poses.R = torch::matmul(R_all.narrow(1, 1, n), R_ref.transpose(2, 3));
+  poses.T = T_all.narrow(1, 1, n) - torch::matmul(poses.R, T_ref.unsqueeze(-1)).squeeze(-1);
+  return poses;
+}
+
+struct DispMvsNetImpl::StageInput {
+  int64_t batch = 0;
+  int64_t sources = 0;
+  int64_t stride = 0;          // stage resolution = full / stride
+  torch::Tensor ref_features;  // [B,C,h,w]
+  torch::Tensor src_features;  // [B*N,C,h,w]
+  torch::Tensor context;       // [B,hidden+input,h,w], raw encoder output
+  int64_t hidden_channels = 0;
+  int64_t levels = 0;
+  int64_t samples = 0;
+  int64_t iterations = 0;
+  // Per (reference, source) pair, [B*N,...], full-resolution intrinsics.
+  torch::Tensor K_ref, K_src, R, T;
+  torch::Tensor init_inv_depth;  // [B,1,h,w], detached, valid everywhere
+  bool keep_every_iteration = false;
+};
+
+struct DispMvsNetImpl::StageResult {
+  struct Iteration {
+    MaskedMap inv_depth;        // fused, [B,1,h,w]
+    torch::Tensor mask_logits;  // [B,9f^2,h,w]; undefined when not kept
+  };
+  std::vector<Iteration> iterations;
+  torch::Tensor state;       // [B,1,h,w] inverse depth carried to the next stage
+  torch::Tensor agreement;   // [B,1,h,w] confidence of the last iteration
+};
+
+DispMvsNetImpl::DispMvsNetImpl(const ModelConfig& config) : config_(config) {
+  config_.Check();
+  if (config_.coarse_iterations < 1 || config_.fine_iterations < 1) {
+    throw std::invalid_argument("DispMvsNet: each stage needs at least one iteration");
+  }
+  matching_encoder_ = register_module("matching_encoder", MatchingEncoder(config_));
+  context_encoder_ = register_module("context_encoder", ContextEncoder(config_));
+  coarse_block_ = register_module(
+      "coarse_update",
+      UpdateBlock(config_.coarse_levels * config_.coarse_samples, config_.hidden_coarse,
+                  config_.context_input_coarse, kUpsampleFactor));
+  fine_block_ = register_module(
+      "fine_update", UpdateBlock(config_.fine_levels * config_.fine_samples, config_.hidden_fine,
+                                 config_.context_input_fine, kUpsampleFactor));
+}
+
+DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, UpdateBlock& block) {
+  const int64_t b = in.batch;
+  const int64_t n = in.sources;
+  const int64_t h = in.ref_features.size(2);
+  const int64_t w = in.ref_features.size(3);
+  const double scale = static_cast<double>(in.stride);
+  if (in.context.size(1) <= in.hidden_channels) {
+    throw std::runtime_error("DispMvsNet: context encoder returned too few channels");
+  }
+
+  const EpipolarPair pair =
+      MakeEpipolarPair(ScaleIntrinsics(in.K_ref, scale), ScaleIntrinsics(in.K_src, scale), in.R,
+                       in.T, h, w);
+  const EpipolarDirection direction = ComputeEpipolarDirection(pair);
+  const EpipolarCorrelation correlation(in.src_features, in.levels, in.samples);
+  const torch::Tensor ref_features = RepeatPerSource(in.ref_features, n);
+
+  // Context: hidden state (tanh) and per-iteration input (relu), one copy per
+  // source pair.
+  const int64_t hid = in.hidden_channels;
+  torch::Tensor hidden = RepeatPerSource(torch::tanh(in.context.narrow(1, 0, hid)), n);
+  const torch::Tensor context = RepeatPerSource(
+      torch::relu(in.context.narrow(1, hid, in.context.size(1) - hid)), n);
+
+  // Base point and direction are fixed for the whole stage; the E-flow is the
+  // offset from the base (method notes, "E-flow").
+  torch::Tensor state = in.init_inv_depth;  // [B,1,h,w], detached
+  const torch::Tensor base_xy = ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy;
+
+  StageResult result;
+  for (int64_t t = 0; t < in.iterations; ++t) {
+    const bool last = t + 1 == in.iterations;
+    // Reset every source's E-flow from the fused depth: keeps the views
+    // consistent (the first iteration gives exactly 0).
+    const torch::Tensor eflow = SourcePixelToEflow(
+        base_xy, direction.dir, ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy);
+    const CorrelationSamples cost = correlation.Lookup(ref_features, base_xy, direction.dir, eflow);
+    const UpdateBlockOutput update = block->forward(hidden, context, cost.cost, eflow);
+    hidden = update.hidden;
+
+    const torch::Tensor src_xy =
+        EflowToSourcePixel(base_xy, direction.dir, eflow + update.delta_eflow);
+    const InverseDepth triangulated = TriangulateInverseDepth(pair, src_xy);
+    const torch::Tensor pair_valid = triangulated.valid & direction.valid;
+    const FusedInverseDepth fused =
+        FuseInverseDepths(triangulated.inv_depth.view({b, n, h, w}),
+                          update.weight_logit.view({b, n, h, w}), pair_valid.view({b, n, h, w}));
+
+    StageResult::Iteration it;
+    it.inv_depth.valid = fused.valid;
+    it.inv_depth.value =
+        torch::where(fused.valid, fused.inv_depth, torch::zeros_like(fused.inv_depth));
+    if (in.keep_every_iteration || last) {
+      // One mask per reference pixel, from the hidden state averaged over
+      // the sources.
+      it.mask_logits = block->MaskLogits(hidden.view({b, n, hid, h, w}).mean(1));
+    }
+    if (last) {
+      const torch::Tensor fused_w = it.inv_depth.value;  // [B,1,h,w]
+      const torch::Tensor per_source = triangulated.inv_depth.view({b, n, h, w});
+      const torch::Tensor agrees =
+          (per_source - fused_w).abs() <= kAgreementTolerance * fused_w.abs();
+      // A diagnostic output, not trained: no gradient.
+      result.agreement = (fused.weights.detach() * agrees.to(fused.weights.scalar_type()))
+                             .sum(1, /*keepdim=*/true);
+    }
+    result.iterations.push_back(it);
+    // Invalid pixels keep their previous inverse depth; detach as the
+    // release does, so each iteration learns its own step.
+    state = torch::where(fused.valid, fused.inv_depth, state).detach();
+  }
+  result.state = state;
+  return result;
+}
+
+DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generator gen) {
+  CheckInput(input);
+  const torch::TensorOptions opts = input.images.options();
+  const int64_t b = input.images.size(0);
+  const int64_t v = input.images.size(1);
+  const int64_t n = v - 1;
+  const int64_t height = input.images.size(3);
+  const int64_t width = input.images.size(4);
+  const int64_t padded_h = (height + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
+  const int64_t padded_w = (width + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
+  const torch::Tensor d_min = input.depth_min.to(opts);
+  const torch::Tensor d_max = input.depth_max.to(opts);
+  const bool keep_every_iteration = is_training();
+
+  // Pad bottom/right: pixel-index intrinsics stay valid.
+  torch::Tensor images = input.images.reshape({b * v, 3, height, width});
+  if (padded_h != height || padded_w != width) {
+    images = F::pad(images, F::PadFuncOptions({0, padded_w - width, 0, padded_h - height})
+                                .mode(torch::kReplicate));
+  }
+  const FeaturePyramid matching = matching_encoder_->forward(images);
+  const FeaturePyramid context =
+      context_encoder_->forward(images.view({b, v, 3, padded_h, padded_w}).select(1, 0));
+  const auto split = [&](const torch::Tensor& f, torch::Tensor& ref, torch::Tensor& src) {
+    const torch::Tensor views = f.view({b, v, f.size(1), f.size(2), f.size(3)});
+    ref = views.select(1, 0);
+    src = views.narrow(1, 1, n).reshape({b * n, f.size(1), f.size(2), f.size(3)});
+  };
+
+  const torch::Tensor K = input.intrinsics.to(opts);
+  const RelativePoses poses = ReferenceToSourcePoses(input.extrinsics.to(opts));
+
+  StageInput stage;
+  stage.batch = b;
+  stage.sources = n;
+  stage.K_ref = RepeatPerSource(K.select(1, 0), n);
+  stage.K_src = K.narrow(1, 1, n).reshape({b * n, 3, 3});
+  stage.R = poses.R.reshape({b * n, 3, 3});
+  stage.T = poses.T.reshape({b * n, 3});
+  stage.keep_every_iteration = keep_every_iteration;
+
+  // Coarse stage from a random inverse depth.
+  stage.stride = kCoarseStride;
+  split(matching.coarse, stage.ref_features, stage.src_features);
+  stage.context = context.coarse;
+  stage.hidden_channels = config_.hidden_coarse;
+  stage.levels = config_.coarse_levels;
+  stage.samples = config_.coarse_samples;
+  stage.iterations = config_.coarse_iterations;
+  stage.init_inv_depth = RandomInverseDepth(d_min, d_max, stage.ref_features.size(2),
+                                            stage.ref_features.size(3), gen)
+                             .to(opts)
+                             .detach();
+  const StageResult coarse = RunStage(stage, coarse_block_);
+
+  // Fine stage from the convex-upsampled coarse state.
+  const torch::Tensor coarse_mask = coarse.iterations.back().mask_logits;
+  stage.stride = kFineStride;
+  split(matching.fine, stage.ref_features, stage.src_features);
+  stage.context = context.fine;
+  stage.hidden_channels = config_.hidden_fine;
+  stage.levels = config_.fine_levels;
+  stage.samples = config_.fine_samples;
+  stage.iterations = config_.fine_iterations;
+  stage.init_inv_depth =
+      ConvexUpsample(coarse.state, coarse_mask, kUpsampleFactor).detach();
+  const StageResult fine = RunStage(stage, fine_block_);
+
+  // Outputs at full resolution.
+  DispMvsOutput out;
+  const auto finish = [&](const MaskedMap& full) {
+    return torch::where(Crop(full.valid, height, width), Crop(full.value, height, width),
+                        torch::zeros({}, opts));
+  };
+  if (keep_every_iteration) {
+    for (const auto& it : coarse.iterations) {
+      out.inv_depths.push_back(finish(
+          BilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor), kUpsampleFactor)));
+    }
+    for (size_t i = 0; i + 1 < fine.iterations.size(); ++i) {
+      const auto& it = fine.iterations[i];
+      out.inv_depths.push_back(finish(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor)));
+    }
+  }
+  const auto& last = fine.iterations.back();
+  const MaskedMap final_map = ConvexUp(last.inv_depth, last.mask_logits, kUpsampleFactor);
+  out.valid = Crop(final_map.valid, height, width);
+  const torch::Tensor final_inv = finish(final_map);
+  out.inv_depths.push_back(final_inv);
+  out.depth = torch::where(out.valid, 1.0 / torch::where(out.valid, final_inv,
+                                                          torch::ones_like(final_inv)),
+                           torch::zeros_like(final_inv));
+  const MaskedMap confidence = ConvexUp(
+      MaskedMap{torch::where(last.inv_depth.valid, fine.agreement, torch::zeros_like(fine.agreement)),
+                last.inv_depth.valid},
+      last.mask_logits, kUpsampleFactor);
+  out.confidence = torch::where(out.valid, Crop(confidence.value, height, width).clamp(0.0, 1.0),
+                                torch::zeros_like(final_inv));
+  return out;
+}
+
+}  // namespace dispmvs::model

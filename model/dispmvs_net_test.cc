@@ -1,0 +1,194 @@
+#include "model/dispmvs_net.h"
+
+#include <stdexcept>
+#include <tuple>
+
+#include <ATen/CPUGeneratorImpl.h>
+#include <gtest/gtest.h>
+
+#include "model/loss.h"
+
+namespace dispmvs::model {
+namespace {
+
+// Random images and a valid rig: reference at the origin, sources shifted
+// sideways (and slightly rotated) by a baseline ~10% of the scene depth.
+DispMvsInput MakeInput(int64_t batch, int64_t sources, int64_t height, int64_t width,
+                       uint64_t seed = 11) {
+  torch::manual_seed(seed);
+  const int64_t views = sources + 1;
+  DispMvsInput in;
+  in.images = torch::rand({batch, views, 3, height, width});
+  torch::Tensor K = torch::zeros({3, 3});
+  K[0][0] = 0.8f * width;
+  K[1][1] = 0.8f * width;
+  K[0][2] = (width - 1) / 2.0f;
+  K[1][2] = (height - 1) / 2.0f;
+  K[2][2] = 1.0f;
+  in.intrinsics = K.expand({batch, views, 3, 3}).clone();
+  in.extrinsics = torch::eye(4).expand({batch, views, 4, 4}).clone();
+  for (int64_t v = 1; v < views; ++v) {
+    const float angle = 0.02f * v;
+    in.extrinsics.index_put_({torch::indexing::Slice(), v, 0, 0}, std::cos(angle));
+    in.extrinsics.index_put_({torch::indexing::Slice(), v, 0, 2}, std::sin(angle));
+    in.extrinsics.index_put_({torch::indexing::Slice(), v, 2, 0}, -std::sin(angle));
+    in.extrinsics.index_put_({torch::indexing::Slice(), v, 2, 2}, std::cos(angle));
+    in.extrinsics.index_put_({torch::indexing::Slice(), v, 0, 3}, -0.3f * v);
+    in.extrinsics.index_put_({torch::indexing::Slice(), v, 1, 3}, 0.05f * v);
+  }
+  in.depth_min = torch::full({batch}, 2.0f);
+  in.depth_max = torch::full({batch}, 6.0f);
+  return in;
+}
+
+ModelConfig FastConfig() {
+  ModelConfig c = ModelConfig::Small();
+  c.coarse_iterations = 3;
+  c.fine_iterations = 2;
+  return c;
+}
+
+class DispMvsNetShapeTest
+    : public ::testing::TestWithParam<std::tuple<int64_t, int64_t, int64_t>> {};
+
+TEST_P(DispMvsNetShapeTest, OutputShapesAndRanges) {
+  const auto [sources, height, width] = GetParam();
+  const ModelConfig config = FastConfig();
+  DispMvsNet net(config);
+  const int64_t batch = 2;
+  const DispMvsInput in = MakeInput(batch, sources, height, width);
+
+  net->train();
+  DispMvsOutput out = net->forward(in);
+  ASSERT_EQ(out.inv_depths.size(),
+            static_cast<size_t>(config.coarse_iterations + config.fine_iterations));
+  for (const auto& inv : out.inv_depths) {
+    EXPECT_EQ(inv.sizes(), torch::IntArrayRef({batch, 1, height, width}));
+    EXPECT_TRUE(torch::isfinite(inv).all().item<bool>());
+  }
+  EXPECT_TRUE(torch::allclose(
+      out.inv_depths.back(),
+      torch::where(out.valid, 1.0 / out.depth, torch::zeros_like(out.depth)), 1e-5, 1e-7));
+
+  torch::NoGradGuard no_grad;
+  net->eval();
+  out = net->forward(in);
+  ASSERT_EQ(out.inv_depths.size(), 1u);
+  for (const torch::Tensor& t : {out.depth, out.confidence, out.inv_depths[0]}) {
+    EXPECT_EQ(t.sizes(), torch::IntArrayRef({batch, 1, height, width}));
+    EXPECT_TRUE(torch::isfinite(t).all().item<bool>());
+  }
+  EXPECT_EQ(out.valid.sizes(), torch::IntArrayRef({batch, 1, height, width}));
+  EXPECT_EQ(out.valid.scalar_type(), torch::kBool);
+  EXPECT_TRUE((out.depth.masked_select(out.valid) > 0).all().item<bool>());
+  EXPECT_TRUE((out.depth.masked_select(~out.valid) == 0).all().item<bool>());
+  EXPECT_TRUE((out.confidence >= 0).all().item<bool>());
+  EXPECT_TRUE((out.confidence <= 1).all().item<bool>());
+  EXPECT_TRUE((out.confidence.masked_select(~out.valid) == 0).all().item<bool>());
+}
+
+INSTANTIATE_TEST_SUITE_P(SourcesAndSizes, DispMvsNetShapeTest,
+                         ::testing::Values(std::make_tuple(1, 64, 64),
+                                           std::make_tuple(2, 72, 100),
+                                           std::make_tuple(4, 48, 80),
+                                           std::make_tuple(2, 20, 33)));
+
+TEST(DispMvsNetTest, DeterministicForAFixedSeed) {
+  DispMvsNet net(FastConfig());
+  net->eval();
+  torch::NoGradGuard no_grad;
+  const DispMvsInput in = MakeInput(1, 2, 48, 64);
+  const auto run = [&](uint64_t seed) {
+    torch::Generator gen = at::make_generator<at::CPUGeneratorImpl>(seed);
+    return net->forward(in, gen);
+  };
+  const DispMvsOutput a = run(42);
+  const DispMvsOutput b = run(42);
+  const DispMvsOutput c = run(43);
+  EXPECT_TRUE(torch::equal(a.depth, b.depth));
+  EXPECT_TRUE(torch::equal(a.confidence, b.confidence));
+  EXPECT_TRUE(torch::equal(a.valid, b.valid));
+  // A different seed is a different random initialisation.
+  EXPECT_FALSE(torch::equal(a.depth, c.depth));
+}
+
+TEST(DispMvsNetTest, GradientReachesEveryParameter) {
+  DispMvsNet net(ModelConfig::Small());
+  net->train();
+  const DispMvsInput in = MakeInput(1, 2, 32, 48);
+  const DispMvsOutput out = net->forward(in);
+  const torch::Tensor gt = torch::full({1, 1, 32, 48}, 3.5f);
+  const torch::Tensor valid = torch::ones({1, 1, 32, 48}, torch::kBool);
+  SequenceLoss(out.inv_depths, gt, valid, in.depth_min, in.depth_max).backward();
+  int64_t checked = 0;
+  for (const auto& p : net->named_parameters()) {
+    ASSERT_TRUE(p.value().grad().defined()) << p.key();
+    EXPECT_GT(p.value().grad().abs().sum().item<double>(), 0.0) << p.key();
+    ++checked;
+  }
+  EXPECT_GT(checked, 20);
+}
+
+// R X_r + T must map a point's reference-camera coordinates to its
+// source-camera coordinates, computed independently through the world frame.
+TEST(DispMvsNetTest, ReferenceToSourcePosesComposeThroughTheWorld) {
+  torch::manual_seed(2);
+  const auto random_pose = [] {
+    const torch::Tensor q = std::get<0>(torch::linalg::qr(torch::randn({3, 3}, torch::kDouble)));
+    torch::Tensor E = torch::eye(4, torch::kDouble);
+    E.narrow(0, 0, 3).narrow(1, 0, 3).copy_(q * torch::det(q));  // a proper rotation
+    E.narrow(0, 0, 3).select(1, 3).copy_(torch::randn({3}, torch::kDouble));
+    return E;
+  };
+  const torch::Tensor extrinsics =
+      torch::stack({random_pose(), random_pose(), random_pose()}).unsqueeze(0);  // [1,3,4,4]
+  const RelativePoses poses = ReferenceToSourcePoses(extrinsics);
+  ASSERT_EQ(poses.R.sizes(), torch::IntArrayRef({1, 2, 3, 3}));
+  ASSERT_EQ(poses.T.sizes(), torch::IntArrayRef({1, 2, 3}));
+  const torch::Tensor world = torch::randn({3, 5}, torch::kDouble);
+  const auto to_camera = [&](int64_t v) {
+    const torch::Tensor E = extrinsics[0][v];
+    return torch::matmul(E.narrow(0, 0, 3).narrow(1, 0, 3), world) + E.narrow(0, 0, 3).narrow(1, 3, 1);
+  };
+  for (int64_t i = 0; i < 2; ++i) {
+    const torch::Tensor mapped =
+        torch::matmul(poses.R[0][i], to_camera(0)) + poses.T[0][i].unsqueeze(1);
+    EXPECT_TRUE(torch::allclose(mapped, to_camera(i + 1), 1e-9, 1e-9)) << i;
+  }
+  EXPECT_THROW(ReferenceToSourcePoses(torch::zeros({1, 1, 4, 4})), std::invalid_argument);
+}
+
+TEST(DispMvsNetTest, RejectsBadInput) {
+  DispMvsNet net(FastConfig());
+  torch::NoGradGuard no_grad;
+  {
+    DispMvsInput in = MakeInput(1, 1, 32, 32);
+    in.images = in.images.narrow(1, 0, 1);  // no source view
+    in.intrinsics = in.intrinsics.narrow(1, 0, 1);
+    in.extrinsics = in.extrinsics.narrow(1, 0, 1);
+    EXPECT_THROW(net->forward(in), std::invalid_argument);
+  }
+  {
+    DispMvsInput in = MakeInput(1, 1, 32, 32);
+    in.intrinsics = torch::zeros({1, 2, 3, 4});
+    EXPECT_THROW(net->forward(in), std::invalid_argument);
+  }
+  {
+    DispMvsInput in = MakeInput(1, 1, 32, 32);
+    in.depth_min = torch::full({1}, 7.0f);  // above depth_max
+    EXPECT_THROW(net->forward(in), std::invalid_argument);
+  }
+  {
+    DispMvsInput in = MakeInput(1, 1, 32, 32);
+    in.extrinsics[0][1][0][3] = std::nanf("");
+    EXPECT_THROW(net->forward(in), std::invalid_argument);
+  }
+  {
+    DispMvsInput in = MakeInput(1, 1, 32, 32);
+    in.images = torch::rand({1, 2, 1, 32, 32});  // one channel
+    EXPECT_THROW(net->forward(in), std::invalid_argument);
+  }
+}
+
+}  // namespace
+}  // namespace dispmvs::model

@@ -1,0 +1,107 @@
+#pragma once
+// The DispMVS network: encoders, then a coarse (1/16) and a fine (1/4) stage
+// of iterative E-flow updates with multi-view triangulation and fusion, then
+// convex upsampling to full resolution (paper Sec. "DispMVS", Fig. 2).
+//
+// One iteration of a stage, for every source view i (batched):
+//   eflow_i  = E-flow of the current fused inverse depth w (project w into
+//              source i; base point and epipolar direction fixed per stage)
+//   cost_i   = EpipolarCorrelation_i.Lookup(ref features, base, dir, eflow_i)
+//   GRU      -> delta E-flow_i, weight logit_i
+//   w_i      = TriangulateInverseDepth(source pixel of eflow_i + delta_i)
+//   w        = FuseInverseDepths(w_i, logits)   (softmax over valid sources)
+// w is detached before the next iteration (as the release and RAFT do); the
+// GRU hidden state is not.
+//
+// The depth range enters only through the random initialisation; nothing is
+// clipped to it. Pixels are invalid where no source gives a valid
+// triangulation (w <= 0, non-finite, degenerate geometry); they carry their
+// previous inverse depth into the next iteration and read 0 in the outputs.
+
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "model/config.h"
+#include "model/encoder.h"
+#include "model/update_block.h"
+
+namespace dispmvs::model {
+
+struct DispMvsInput {
+  // [B,V,3,H,W], values in [0,1]; view 0 is the reference, views 1..V-1
+  // (V >= 2) the sources. Any H, W >= 1: the network pads to multiples of 16
+  // (replicating the border) and crops its outputs back.
+  torch::Tensor images;
+  // [B,V,3,3] intrinsics at full resolution in the pixel-index convention
+  // (the centre of pixel (row i, col j) is (x, y) = (j, i)).
+  torch::Tensor intrinsics;
+  // [B,V,4,4] world-to-camera matrices [R T; 0 0 0 1]: X_cam = R X_world + T
+  // (COLMAP's convention). Only the top 3x4 block is read.
+  torch::Tensor extrinsics;
+  // [B] positive depth range hint, depth_min < depth_max: used for the random
+  // initialisation only (and by the loss for normalisation).
+  torch::Tensor depth_min;
+  torch::Tensor depth_max;
+};
+
+struct DispMvsOutput {
+  // Fused inverse depth after each iteration, upsampled to [B,1,H,W]: t_c
+  // coarse entries then t_f fine ones, 0 where invalid. In training mode
+  // (is_training()) every iteration is returned, for SequenceLoss; in eval
+  // mode only the final one (saving the per-iteration upsampling).
+  std::vector<torch::Tensor> inv_depths;
+  torch::Tensor depth;  // [B,1,H,W] final depth, 0 where invalid
+  torch::Tensor valid;  // [B,1,H,W] bool
+  // [B,1,H,W] in [0,1], 0 where invalid: the fusion weight mass (softmax over
+  // sources, at the last fine iteration) of the sources whose own triangulated
+  // inverse depth agrees with the fused one within kAgreementTolerance
+  // (relative), convex-upsampled like the depth. 1 = every source that the
+  // network trusts agrees; with a single source it only says whether that
+  // source triangulated validly.
+  torch::Tensor confidence;
+};
+
+// Motion from the reference (view 0) to every source view, from world-to-camera
+// extrinsics [B,V,4,4]: X_s = R X_r + T with R = R_s R_r^T, T = T_s - R T_r.
+// Returns R [B,V-1,3,3] and T [B,V-1,3] (geometry.h's pair convention).
+struct RelativePoses {
+  torch::Tensor R;
+  torch::Tensor T;
+};
+RelativePoses ReferenceToSourcePoses(const torch::Tensor& extrinsics);
+
+class DispMvsNetImpl : public torch::nn::Module {
+ public:
+  // Relative inverse-depth difference under which a source "agrees" with the
+  // fused result, for the confidence.
+  static constexpr double kAgreementTolerance = 0.02;
+  // Both stages upsample by 4: 1/16 -> 1/4 and 1/4 -> 1.
+  static constexpr int64_t kUpsampleFactor = 4;
+  static constexpr int64_t kCoarseStride = 16;
+  static constexpr int64_t kFineStride = 4;
+
+  // Throws std::invalid_argument if config.Check() fails.
+  explicit DispMvsNetImpl(const ModelConfig& config);
+
+  // Throws std::invalid_argument on malformed input (shapes, V < 2, a depth
+  // range that is not 0 < depth_min < depth_max, non-finite values).
+  // `gen` drives the random initialisation (default generator if undefined).
+  DispMvsOutput forward(const DispMvsInput& input, torch::Generator gen = {});
+
+  const ModelConfig& config() const { return config_; }
+
+ private:
+  struct StageResult;
+  struct StageInput;
+  StageResult RunStage(const StageInput& stage, UpdateBlock& block);
+
+  ModelConfig config_;
+  MatchingEncoder matching_encoder_{nullptr};
+  ContextEncoder context_encoder_{nullptr};
+  UpdateBlock coarse_block_{nullptr};
+  UpdateBlock fine_block_{nullptr};
+};
+TORCH_MODULE(DispMvsNet);
+
+}  // namespace dispmvs::model
