@@ -1,0 +1,168 @@
+#include "synth/generator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <tuple>
+
+#include "synth/raycast.h"
+#include "synth/rng.h"
+#include "synth/scene_builder.h"
+#include "synth/texture.h"
+
+namespace dispmvs::synth {
+namespace {
+
+// Independent random streams, so that e.g. the drawn scale does not change
+// which scene a seed gives.
+enum Stream : uint64_t { kRigStream = 1, kSceneStream = 2, kPhotometryStream = 3, kScaleStream = 4 };
+
+RigKind DrawRig(const SynthConfig& c, Rng& rng) {
+  const double weights[kNumRigKinds] = {c.p_table, c.p_walkthrough, c.p_turntable, c.p_outdoor};
+  double total = 0;
+  for (double w : weights) total += w;
+  double pick = rng.Uniform() * total;
+  for (int k = 0; k < kNumRigKinds; ++k) {
+    if (weights[k] > 0 && pick < weights[k]) return static_cast<RigKind>(k);
+    pick -= weights[k];
+  }
+  // Rounding left `pick` at the top: the last rig with positive weight.
+  for (int k = kNumRigKinds - 1; k >= 0; --k)
+    if (weights[k] > 0) return static_cast<RigKind>(k);
+  throw std::logic_error("DrawRig: no rig has positive probability");
+}
+
+torch::Tensor IntrinsicsMatrix(const PinholeCamera& cam) {
+  return torch::tensor({cam.fx, 0.0, cam.cx, 0.0, cam.fy, cam.cy, 0.0, 0.0, 1.0}, torch::kDouble).view({3, 3});
+}
+
+torch::Tensor WorldToCamera(const PinholeCamera& cam, double scale) {
+  torch::Tensor m = torch::eye(4, torch::kDouble);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) m[r][c] = cam.rotation(r, c);
+    m[r][3] = scale * cam.translation[r];
+  }
+  return m;
+}
+
+}  // namespace
+
+void SynthConfig::Check() const {
+  auto fail = [](const std::string& what) { throw std::invalid_argument("SynthConfig: " + what); };
+  if (height < 8 || width < 8 || height > 8192 || width > 8192) fail("height and width must be in [8, 8192]");
+  if (num_views < 2 || num_views > 64) fail("num_views must be in [2, 64]");
+  const double p[] = {p_table, p_walkthrough, p_turntable, p_outdoor};
+  double total = 0;
+  for (double x : p) {
+    if (!(x >= 0) || !std::isfinite(x)) fail("rig probabilities must be finite and >= 0");
+    total += x;
+  }
+  if (!(total > 0)) fail("at least one rig probability must be positive");
+  if (min_objects < 0 || max_objects < min_objects || max_objects > 1000) fail("need 0 <= min_objects <= max_objects <= 1000");
+  if (!(scale_min > 0) || !(scale_max >= scale_min) || !std::isfinite(scale_max)) fail("need 0 < scale_min <= scale_max < inf");
+  if (!(intrinsics.fov_min_deg >= 5) || !(intrinsics.fov_max_deg >= intrinsics.fov_min_deg) ||
+      !(intrinsics.fov_max_deg <= 150)) {
+    fail("field of view range must lie in [5, 150] degrees");
+  }
+  if (!(intrinsics.focal_jitter >= 0 && intrinsics.focal_jitter < 0.5) ||
+      !(intrinsics.principal_jitter >= 0 && intrinsics.principal_jitter < 0.1)) {
+    fail("focal_jitter must be in [0, 0.5) and principal_jitter in [0, 0.1)");
+  }
+  const PhotometryRanges& ph = photometry;
+  if (!(ph.gain_min > 0 && ph.gain_max >= ph.gain_min && ph.gain_max < 100 && ph.gamma_min > 0.1 &&
+        ph.gamma_max >= ph.gamma_min && ph.gamma_max < 10 && ph.white_balance_jitter >= 0 &&
+        ph.white_balance_jitter < 1 && ph.noise_sigma_max >= 0 && ph.noise_sigma_max < 1 &&
+        ph.blur_sigma_max >= 0 && ph.blur_sigma_max <= 10)) {
+    fail("photometry ranges out of bounds");
+  }
+  if (dtype != torch::kFloat && dtype != torch::kDouble) fail("dtype must be float32 or float64");
+  if (march_steps < 1 || march_steps > 256 || bisection_steps < 0 || bisection_steps > 64) {
+    fail("march_steps must be in [1, 256] and bisection_steps in [0, 64]");
+  }
+}
+
+SynthScene DrawScene(const SynthConfig& config, uint64_t seed) {
+  config.Check();
+  Rng root(seed);
+  Rng rig_rng = root.Fork(kRigStream), scene_rng = root.Fork(kSceneStream);
+  Rng photometry_rng = root.Fork(kPhotometryStream), scale_rng = root.Fork(kScaleStream);
+
+  SynthScene out;
+  out.rig = DrawRig(config, rig_rng);
+  IntrinsicsRanges intrinsics = config.intrinsics;
+  intrinsics.height = config.height;
+  intrinsics.width = config.width;
+  const Rig rig = MakeRig(out.rig, config.num_views, intrinsics, rig_rng);
+  const int objects = static_cast<int>(scene_rng.Int(config.min_objects, config.max_objects));
+  out.scene = BuildScene(rig, objects, config.height, config.width, scene_rng);
+  out.cameras = rig.cameras;
+  for (int v = 0; v < config.num_views; ++v) out.photometry.push_back(RandomPhotometry(config.photometry, photometry_rng));
+  out.scale = scale_rng.LogUniform(config.scale_min, config.scale_max);
+  return out;
+}
+
+SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::Device device) {
+  config.Check();
+  const int64_t views = static_cast<int64_t>(s.cameras.size());
+  if (views < 1 || s.photometry.size() != s.cameras.size()) {
+    throw std::invalid_argument("RenderSample: need one photometry per camera and at least one camera");
+  }
+  RaycastOptions options;
+  options.device = device;
+  options.dtype = config.dtype;
+  options.march_steps = config.march_steps;
+  options.bisection_steps = config.bisection_steps;
+  const auto real = torch::TensorOptions().dtype(config.dtype).device(device);
+
+  // Texture of each primitive, plus -1 (no surface) in a last entry that
+  // pixels without a hit (primitive -1) are pointed at.
+  std::vector<int64_t> texture_ids;
+  for (const Primitive& p : s.scene.primitives) texture_ids.push_back(p.texture);
+  texture_ids.push_back(-1);
+  const torch::Tensor texture_of_primitive = torch::tensor(texture_ids, torch::kLong).to(device);
+
+  std::vector<torch::Tensor> images, depths, intrinsics, extrinsics;
+  for (int64_t v = 0; v < views; ++v) {
+    const PinholeCamera& cam = s.cameras[static_cast<size_t>(v)];
+    const RayHits hits = CastImage(s.scene, cam, config.height, config.width, options);
+    const torch::Tensor flat_primitive = hits.primitive.reshape({-1});
+    const torch::Tensor texture = texture_of_primitive.index_select(
+        0, torch::where(flat_primitive >= 0, flat_primitive, texture_of_primitive.size(0) - 1));
+    const torch::Tensor albedo = EvaluateAlbedo(s.scene.textures, texture, hits.uv.reshape({-1, 2}), s.scene.empty_color)
+                                     .t()
+                                     .reshape({3, config.height, config.width});
+    const torch::Tensor radiance = ShadeLambertian(albedo, hits.normal, s.scene.light_direction, s.scene.ambient);
+    images.push_back(ApplyPhotometry(radiance, s.photometry[static_cast<size_t>(v)]));
+    depths.push_back((hits.depth * s.scale).unsqueeze(0));
+    intrinsics.push_back(IntrinsicsMatrix(cam));
+    extrinsics.push_back(WorldToCamera(cam, s.scale));
+  }
+  SynthSample sample;
+  sample.images = torch::stack(images);
+  sample.depths = torch::stack(depths);
+  sample.intrinsics = torch::stack(intrinsics).to(real);
+  sample.world_to_camera = torch::stack(extrinsics).to(real);
+  std::tie(sample.depth_min, sample.depth_max) = RobustDepthRange(sample.depths[0]);
+  sample.scale = s.scale;
+  sample.rig = RigName(s.rig);
+  return sample;
+}
+
+SynthSample GenerateSample(const SynthConfig& config, uint64_t seed, torch::Device device) {
+  return RenderSample(DrawScene(config, seed), config, device);
+}
+
+std::pair<double, double> RobustDepthRange(const torch::Tensor& depth, double q_low, double q_high) {
+  if (!(0 <= q_low && q_low <= q_high && q_high <= 1)) throw std::invalid_argument("RobustDepthRange: bad quantiles");
+  const torch::Tensor flat = depth.reshape({-1}).to(torch::kCPU, torch::kDouble);
+  const torch::Tensor positive = std::get<0>(torch::sort(flat.masked_select(flat > 0)));
+  const int64_t n = positive.numel();
+  if (n == 0) return {0.0, 0.0};
+  auto at = [&](double q) {
+    const int64_t rank = std::clamp<int64_t>(static_cast<int64_t>(std::llround(q * static_cast<double>(n - 1))), 0, n - 1);
+    return positive[rank].item<double>();
+  };
+  return {at(q_low), at(q_high)};
+}
+
+}  // namespace dispmvs::synth

@@ -1,0 +1,77 @@
+#pragma once
+// One training sample: a random scene, V = 1 + N views of it, their images
+// and exact depth maps.
+//
+// Pipeline: DrawScene picks everything random with scalar code on the CPU
+// (rig, cameras, objects, textures, light, per-view photometry, metric
+// scale); RenderSample then ray-casts and shades every view on the requested
+// device. The scene is built and rendered at unit scale; the metric scale
+// multiplies only the outputs that carry a length (depths, camera
+// translations, depth range). So a sample at scale 1e-3 and at 1e3 from the
+// same seed has identical images and depths that differ by exactly that
+// factor (up to one float rounding), and a network trained on such samples
+// cannot rely on the unit.
+//
+// Determinism: the same (config, seed) gives the same tensors bit for bit on
+// the same device (no device random generator is used: noise is hashed).
+
+#include <torch/torch.h>
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "synth/camera.h"
+#include "synth/rigs.h"
+#include "synth/scene.h"
+#include "synth/shading.h"
+
+namespace dispmvs::synth {
+
+struct SynthConfig {
+  int64_t height = 256, width = 320;
+  int num_views = 5;  // reference + sources, >= 2
+  // Relative probabilities of the rigs (need not sum to 1, at least one > 0).
+  double p_table = 0.3, p_walkthrough = 0.25, p_turntable = 0.2, p_outdoor = 0.25;
+  int min_objects = 8, max_objects = 24;  // free objects per scene (uniform count)
+  double scale_min = 1e-3, scale_max = 1e3;  // metric scale, log-uniform
+  IntrinsicsRanges intrinsics;  // its height/width are overridden by the fields above
+  PhotometryRanges photometry;
+  torch::ScalarType dtype = torch::kFloat;  // of images, depths and camera tensors
+  int march_steps = 32, bisection_steps = 12;  // height-field ray marching (see raycast.h)
+
+  // Throws std::invalid_argument on sizes, counts or ranges that make no sense.
+  void Check() const;
+};
+
+struct SynthSample {
+  torch::Tensor images;           // [V,3,H,W] in [0,1]; view 0 is the reference
+  torch::Tensor intrinsics;       // [V,3,3], pixel-index convention (pixel (i,j) centre at (j,i))
+  torch::Tensor world_to_camera;  // [V,4,4], metric (translations scaled)
+  torch::Tensor depths;           // [V,1,H,W] camera-frame z, 0 where no surface
+  // Robust depth range of the reference view: the 2nd and 98th percentiles
+  // of its positive depths (0, 0 if it has none). Like the range of a
+  // sparse reconstruction: plausible, not a hard bound.
+  double depth_min = 0, depth_max = 0;
+  double scale = 1;  // the metric scale applied
+  std::string rig;   // RigName() of the rig used
+};
+
+// Everything random about a sample, at unit scale.
+struct SynthScene {
+  RigKind rig = RigKind::kTable;
+  Scene scene;
+  std::vector<PinholeCamera> cameras;  // [0] is the reference
+  std::vector<ViewPhotometry> photometry;
+  double scale = 1;
+};
+
+SynthScene DrawScene(const SynthConfig& config, uint64_t seed);
+SynthSample RenderSample(const SynthScene& scene, const SynthConfig& config, torch::Device device);
+SynthSample GenerateSample(const SynthConfig& config, uint64_t seed, torch::Device device);
+
+// The robust depth range used for SynthSample: the q_low and q_high
+// quantiles (nearest rank) of the positive values of `depth`; {0, 0} if none.
+std::pair<double, double> RobustDepthRange(const torch::Tensor& depth, double q_low = 0.02, double q_high = 0.98);
+
+}  // namespace dispmvs::synth

@@ -1,0 +1,55 @@
+#pragma once
+// Turning albedo and geometry into the image one camera records.
+//
+// Radiance is Lambertian under one directional light per scene plus an
+// ambient term, so it is the same from every viewpoint; what changes per
+// view is the camera (ViewPhotometry): exposure gain and white balance,
+// optical blur, sensor noise and the tone curve (gamma). Those differences
+// are what a learned matcher must see through; identical pixel values across
+// views would let it cheat.
+// Order, as in a camera: blur (optics) -> gain (exposure) -> additive
+// Gaussian noise (sensor) -> clamp to [0, 1] -> gamma (tone curve).
+
+#include <torch/torch.h>
+
+#include <array>
+#include <cstdint>
+
+#include "synth/vec3.h"
+
+namespace dispmvs::synth {
+
+class Rng;
+
+struct ViewPhotometry {
+  double gain = 1.0;                           // exposure x gain
+  std::array<double, 3> white_balance{1, 1, 1};  // per-channel gain
+  double gamma = 1.0;                          // output = input^(1/gamma)
+  double noise_sigma = 0.0;                    // std of the additive noise (image units)
+  double blur_sigma = 0.0;                     // Gaussian blur std in pixels (0: none)
+  uint32_t noise_seed = 0;
+
+  void Check() const;  // throws std::invalid_argument on values outside sane ranges
+};
+
+// Ranges RandomPhotometry draws from (uniformly; gain log-uniformly).
+struct PhotometryRanges {
+  double gain_min = 0.7, gain_max = 1.4;
+  double white_balance_jitter = 0.06;  // each channel in [1 - j, 1 + j]
+  double gamma_min = 0.8, gamma_max = 1.25;
+  double noise_sigma_max = 0.02;
+  double blur_sigma_max = 0.8;
+};
+
+ViewPhotometry RandomPhotometry(const PhotometryRanges& ranges, Rng& rng);
+
+// Lambertian radiance [3,H,W]: albedo * (ambient + (1 - ambient) max(0, n . l)).
+// albedo [3,H,W]; normal [H,W,3] unit world normals, 0 where there is no
+// surface (such pixels get albedo x ambient); light: unit vector towards it.
+torch::Tensor ShadeLambertian(const torch::Tensor& albedo, const torch::Tensor& normal,
+                              const Vec3& light, double ambient);
+
+// The recorded image [3,H,W] in [0, 1] for radiance [3,H,W].
+torch::Tensor ApplyPhotometry(const torch::Tensor& radiance, const ViewPhotometry& photometry);
+
+}  // namespace dispmvs::synth
