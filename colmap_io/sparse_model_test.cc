@@ -23,11 +23,15 @@
 #include "colmap_io/camera_models.h"
 #include "colmap_io/error.h"
 #include "colmap_io/sparse_model_io.h"
+#include "tests/support/sparse_model_fixtures.h"
 #include "tests/support/temp_dir.h"
 
 namespace dispmvs::colmap_io {
 namespace {
 
+using testing::ExpectIdenticalModels;
+using testing::MakeCamera;
+using testing::MakeImage;
 using testing::ReadFileBytes;
 using testing::TempDir;
 using testing::WriteFileBytes;
@@ -70,67 +74,6 @@ class Bytes {
   std::string data_;
 };
 
-bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
-
-// Exact comparison (bit patterns for doubles, so -0.0 != 0.0 and NaN never
-// sneaks through).
-void ExpectIdenticalModels(const SparseModel& expected, const SparseModel& actual) {
-  ASSERT_EQ(expected.cameras.size(), actual.cameras.size());
-  for (const auto& [id, cam] : expected.cameras) {
-    ASSERT_EQ(actual.cameras.count(id), 1u) << "camera " << id;
-    const Camera& got = actual.cameras.at(id);
-    EXPECT_EQ(got.camera_id, cam.camera_id);
-    EXPECT_EQ(got.model_id, cam.model_id);
-    EXPECT_EQ(got.width, cam.width);
-    EXPECT_EQ(got.height, cam.height);
-    ASSERT_EQ(got.params.size(), cam.params.size());
-    for (size_t i = 0; i < cam.params.size(); ++i) {
-      EXPECT_TRUE(SameBits(got.params[i], cam.params[i]))
-          << "camera " << id << " param " << i << ": " << got.params[i] << " vs " << cam.params[i];
-    }
-  }
-  ASSERT_EQ(expected.images.size(), actual.images.size());
-  for (const auto& [id, img] : expected.images) {
-    ASSERT_EQ(actual.images.count(id), 1u) << "image " << id;
-    const Image& got = actual.images.at(id);
-    EXPECT_EQ(got.image_id, img.image_id);
-    EXPECT_EQ(got.camera_id, img.camera_id);
-    EXPECT_EQ(got.name, img.name);
-    for (int k = 0; k < 4; ++k) EXPECT_TRUE(SameBits(got.qvec(k), img.qvec(k))) << "image " << id;
-    for (int k = 0; k < 3; ++k) EXPECT_TRUE(SameBits(got.tvec(k), img.tvec(k))) << "image " << id;
-    ASSERT_EQ(got.points2D.size(), img.points2D.size());
-    for (size_t i = 0; i < img.points2D.size(); ++i) {
-      EXPECT_TRUE(SameBits(got.points2D[i].xy.x(), img.points2D[i].xy.x()));
-      EXPECT_TRUE(SameBits(got.points2D[i].xy.y(), img.points2D[i].xy.y()));
-      EXPECT_EQ(got.points2D[i].point3D_id, img.points2D[i].point3D_id);
-    }
-  }
-  ASSERT_EQ(expected.points3D.size(), actual.points3D.size());
-  for (const auto& [id, pt] : expected.points3D) {
-    ASSERT_EQ(actual.points3D.count(id), 1u) << "point3D " << id;
-    const Point3D& got = actual.points3D.at(id);
-    EXPECT_EQ(got.point3D_id, pt.point3D_id);
-    for (int k = 0; k < 3; ++k) EXPECT_TRUE(SameBits(got.xyz(k), pt.xyz(k))) << "point " << id;
-    EXPECT_EQ(got.rgb, pt.rgb);
-    EXPECT_TRUE(SameBits(got.error, pt.error));
-    ASSERT_EQ(got.track.size(), pt.track.size());
-    for (size_t e = 0; e < pt.track.size(); ++e) {
-      EXPECT_EQ(got.track[e].image_id, pt.track[e].image_id);
-      EXPECT_EQ(got.track[e].point2D_idx, pt.track[e].point2D_idx);
-    }
-  }
-}
-
-Camera MakeCamera(camera_t id, int model_id, uint64_t w, uint64_t h, std::vector<double> params) {
-  Camera c;
-  c.camera_id = id;
-  c.model_id = model_id;
-  c.width = w;
-  c.height = h;
-  c.params = std::move(params);
-  return c;
-}
-
 Point2D Obs(double x, double y, point3D_t id = kInvalidPoint3DId) {
   Point2D p;
   p.xy = Eigen::Vector2d(x, y);
@@ -154,30 +97,14 @@ SparseModel MakeRichModel() {
                              {1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12});
 
   const point3D_t big_id = (uint64_t{1} << 40) + 3;
-  Image a;
-  a.image_id = 1;
-  a.camera_id = 1;
-  a.name = "a.jpg";
-  a.qvec = Eigen::Vector4d(1, 0, 0, 0);
-  a.tvec = Eigen::Vector3d(0.1, -0.2, 0.3);
+  Image a = MakeImage(1, 1, "a.jpg", {1, 0, 0, 0}, {0.1, -0.2, 0.3});
   a.points2D = {Obs(10.5, 20.25, 5), Obs(1.0 / 3.0, 2.0 / 3.0), Obs(300, 200, big_id)};
-  Image b;
-  b.image_id = 4;
-  b.camera_id = 2;
-  b.name = "sub/dir/b.png";
-  b.qvec = Eigen::Vector4d(0.1, -0.7, 0.5, 0.3).normalized();
-  b.tvec = Eigen::Vector3d(-1e-9, 12345.678, -0.0);
+  Image b = MakeImage(4, 2, "sub/dir/b.png", Eigen::Vector4d(0.1, -0.7, 0.5, 0.3).normalized(),
+                      {-1e-9, 12345.678, -0.0});
   b.points2D = {Obs(-0.0, 599.999, big_id), Obs(1, 2, 5)};
-  Image c;
-  c.image_id = 70000;
-  c.camera_id = 9;
-  c.name = "sub/c.JPG";
-  c.qvec = Eigen::Vector4d(0.5, 0.5, -0.5, 0.5);
-  c.tvec = Eigen::Vector3d(1, 2, 3);  // no points2D at all
-  Image d;
-  d.image_id = 5;
-  d.camera_id = 7;
-  d.name = "d.tif";
+  // No points2D at all.
+  const Image c = MakeImage(70000, 9, "sub/c.JPG", {0.5, 0.5, -0.5, 0.5}, {1, 2, 3});
+  Image d = MakeImage(5, 7, "d.tif", {1, 0, 0, 0}, {0, 0, 0});
   d.points2D = {Obs(5, 6)};
   m.images[a.image_id] = a;
   m.images[b.image_id] = b;
