@@ -8,6 +8,9 @@
 # corpus from files our writers produce, runs each target for the given time
 # with a 512 MB RSS limit, and exits non-zero if any target found a crash
 # (crashing inputs are kept under BUILD/fuzz-work/artifacts/).
+#
+# Needs clang and its sanitizer runtimes, besides .ci/install_deps.sh:
+#   apt-get install clang libclang-rt-14-dev
 set -euo pipefail
 
 seconds="${1:-60}"
