@@ -1,0 +1,167 @@
+// dispmvs_train: trains DispMVS on generated scenes, or evaluates weights on
+// the fixed validation scenes with the depth-range hint widened x = 1, 2, 3.
+//
+//   dispmvs_train --checkpoint-dir DIR [options]     train (resumes from DIR)
+//   dispmvs_train --evaluate WEIGHTS [options]        print the validation table
+//
+// LibTorch and the standard library only (no Boost): the command line is
+// parsed by hand, strictly: every option takes one value, unknown options
+// and malformed values are errors.
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <iostream>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+#include "train/trainer.h"
+
+namespace {
+
+using dispmvs::train::TrainOptions;
+
+constexpr const char* kUsage = R"(usage:
+  dispmvs_train --checkpoint-dir DIR [options]   train, resuming from DIR's latest checkpoint
+  dispmvs_train --evaluate WEIGHTS [options]     validation table for depth-range widening x = 1, 2, 3
+
+options (default):
+  --config paper|small        network size (small); training only, evaluation reads it from WEIGHTS
+  --height H --width W        image size (128, 160)
+  --sources N                 source views per sample (4)
+  --batch B                   samples per step (1)
+  --steps S                   total steps (1000)
+  --lr LR                     Adam learning rate (2e-4)
+  --lr-halve-every K          halve the learning rate every K steps, 0 = never (0)
+  --grad-clip C               max gradient norm, 0 = off (1)
+  --seed S                    run seed (0)
+  --device cpu|cuda|cuda:I    (cpu)
+  --threads T                 intra-op threads, 0 = one per core (0)
+  --checkpoint-every K        (100)
+  --validate-every K          0 = only at the end (0)
+  --val-scenes M              validation scenes (8)
+  --val-seed-base S           first validation seed (1000000000)
+  --help                      this text
+)";
+
+int64_t ParseInt(const std::string& flag, const std::string& value) {
+  size_t used = 0;
+  long long v = 0;
+  try {
+    v = std::stoll(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (value.empty() || used != value.size()) {
+    throw std::invalid_argument(flag + " expects an integer, got '" + value + "'");
+  }
+  return v;
+}
+
+uint64_t ParseUnsigned(const std::string& flag, const std::string& value) {
+  size_t used = 0;
+  unsigned long long v = 0;
+  try {
+    v = std::stoull(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (value.empty() || value[0] == '-' || used != value.size()) {
+    throw std::invalid_argument(flag + " expects a non-negative integer, got '" + value + "'");
+  }
+  return v;
+}
+
+double ParseDouble(const std::string& flag, const std::string& value) {
+  size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (value.empty() || used != value.size() || !std::isfinite(v)) {
+    throw std::invalid_argument(flag + " expects a finite number, got '" + value + "'");
+  }
+  return v;
+}
+
+struct CommandLine {
+  TrainOptions options;
+  std::string evaluate_weights;  // empty: train
+  bool help = false;
+};
+
+CommandLine Parse(int argc, char** argv) {
+  CommandLine cl;
+  TrainOptions& o = cl.options;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "--help" || flag == "-h") {
+      cl.help = true;
+      return cl;
+    }
+    if (flag.rfind("--", 0) != 0) throw std::invalid_argument("unexpected argument '" + flag + "'");
+    if (i + 1 >= argc) throw std::invalid_argument("missing value after " + flag);
+    const std::string value = argv[++i];
+    if (flag == "--checkpoint-dir") o.checkpoint_dir = value;
+    else if (flag == "--evaluate") cl.evaluate_weights = value;
+    else if (flag == "--config") o.config = value;
+    else if (flag == "--height") o.height = ParseInt(flag, value);
+    else if (flag == "--width") o.width = ParseInt(flag, value);
+    else if (flag == "--sources") o.num_sources = ParseInt(flag, value);
+    else if (flag == "--batch") o.batch_size = ParseInt(flag, value);
+    else if (flag == "--steps") o.steps = ParseInt(flag, value);
+    else if (flag == "--lr") o.lr = ParseDouble(flag, value);
+    else if (flag == "--lr-halve-every") o.lr_halve_every = ParseInt(flag, value);
+    else if (flag == "--grad-clip") o.grad_clip = ParseDouble(flag, value);
+    else if (flag == "--seed") o.seed = ParseUnsigned(flag, value);
+    else if (flag == "--device") o.device = value;
+    else if (flag == "--threads") o.threads = ParseInt(flag, value);
+    else if (flag == "--checkpoint-every") o.checkpoint_every = ParseInt(flag, value);
+    else if (flag == "--validate-every") o.validate_every = ParseInt(flag, value);
+    else if (flag == "--val-scenes") o.num_validation_scenes = ParseInt(flag, value);
+    else if (flag == "--val-seed-base") o.validation_seed_base = ParseUnsigned(flag, value);
+    else throw std::invalid_argument("unknown option " + flag + " (see --help)");
+  }
+  if (cl.evaluate_weights.empty() && o.checkpoint_dir.empty()) {
+    throw std::invalid_argument("give --checkpoint-dir DIR (train) or --evaluate WEIGHTS (see --help)");
+  }
+  if (!cl.evaluate_weights.empty() && !o.checkpoint_dir.empty()) {
+    throw std::invalid_argument("--evaluate and --checkpoint-dir exclude each other");
+  }
+  return cl;
+}
+
+void PrintEvaluation(const CommandLine& cl) {
+  const auto& o = cl.options;
+  const auto rows = dispmvs::train::EvaluateWeights(cl.evaluate_weights, o, {1, 2, 3});
+  std::cout << "weights " << cl.evaluate_weights << ": " << o.num_validation_scenes
+            << " validation scenes (seeds " << o.validation_seed_base << "..), " << o.width << "x"
+            << o.height << ", N = " << o.num_sources << "\n";
+  for (const auto& row : rows) {
+    std::printf("x=%g  %s\n", row.widening, dispmvs::train::FormatMetrics(row.metrics).c_str());
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const CommandLine cl = Parse(argc, argv);
+    if (cl.help) {
+      std::cout << kUsage;
+      return 0;
+    }
+    if (!cl.evaluate_weights.empty()) {
+      PrintEvaluation(cl);
+    } else {
+      dispmvs::train::Train(cl.options, std::cout);
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::cerr << "error: " << e.what() << "\n";
+    return 1;
+  }
+}

@@ -1,0 +1,423 @@
+#include "train/trainer.h"
+
+#include <ATen/CPUGeneratorImpl.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <thread>
+
+#include "model/config.h"
+#include "model/dispmvs_net.h"
+#include "model/loss.h"
+#include "model/safetensors.h"
+#include "synth/generator.h"
+#include "train/batch.h"
+
+namespace dispmvs::train {
+namespace {
+
+namespace fs = std::filesystem;
+using model::DispMvsNet;
+using model::ModelConfig;
+
+constexpr uint64_t kTopBit = uint64_t{1} << 63;
+// A generated scene can show no surface at all in the reference view (no
+// usable depth range); such draws are replaced by the next seed in a fixed
+// sequence, so the replacement is deterministic too.
+constexpr int kMaxDrawAttempts = 16;
+
+uint64_t SplitMix64(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
+uint64_t Mix(uint64_t a, uint64_t b) { return SplitMix64(a ^ SplitMix64(b)); }
+
+// Seed of the network's random initialisation at training step `step`.
+uint64_t TrainingInitSeed(uint64_t seed, int64_t step) {
+  return Mix(Mix(seed, 0xD15A11u), static_cast<uint64_t>(step));
+}
+
+torch::Generator CpuGenerator(uint64_t seed) {
+  return at::make_generator<at::CPUGeneratorImpl>(seed);
+}
+
+torch::Device ParseDevice(const std::string& text) {
+  std::unique_ptr<torch::Device> device;
+  try {
+    device = std::make_unique<torch::Device>(text);
+  } catch (const std::exception&) {
+    throw std::invalid_argument("device must be cpu, cuda or cuda:<index>, got '" + text + "'");
+  }
+  if (!device->is_cpu() && !device->is_cuda()) {
+    throw std::invalid_argument("device must be cpu, cuda or cuda:<index>, got '" + text + "'");
+  }
+  return *device;
+}
+
+ModelConfig ModelConfigByName(const std::string& name) {
+  if (name == "paper") return ModelConfig::Paper();
+  if (name == "small") return ModelConfig::Small();
+  throw std::invalid_argument("config must be 'paper' or 'small', got '" + name + "'");
+}
+
+synth::SynthConfig SynthConfigFor(const TrainOptions& options) {
+  synth::SynthConfig config;
+  config.height = options.height;
+  config.width = options.width;
+  config.num_views = static_cast<int>(options.num_sources + 1);
+  config.Check();
+  return config;
+}
+
+// The sample for `seed`, or for the first usable seed after it in the
+// sequence seed, Mix(seed, 1), Mix(seed, 2), ..., each with the top bit of
+// `seed` kept, so that training and validation seeds stay disjoint.
+synth::SynthSample GenerateUsableSample(const synth::SynthConfig& config, uint64_t seed,
+                                        torch::Device device) {
+  const uint64_t top = seed & kTopBit;
+  uint64_t attempt_seed = seed;
+  for (int attempt = 0; attempt < kMaxDrawAttempts; ++attempt) {
+    auto sample = synth::GenerateSample(config, attempt_seed, device);
+    if (sample.depth_min > 0 && sample.depth_min < sample.depth_max) return sample;
+    attempt_seed = (Mix(seed, static_cast<uint64_t>(attempt + 1)) & ~kTopBit) | top;
+  }
+  throw std::runtime_error("no usable synthetic scene after " + std::to_string(kMaxDrawAttempts) +
+                           " draws from seed " + std::to_string(seed));
+}
+
+void SetThreads(int64_t threads) {
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  torch::set_num_threads(static_cast<int>(threads));
+}
+
+std::string FormatDuration(double seconds) {
+  const auto total = static_cast<int64_t>(std::max(0.0, seconds) + 0.5);
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%lld:%02lld:%02lld", static_cast<long long>(total / 3600),
+                static_cast<long long>(total / 60 % 60), static_cast<long long>(total % 60));
+  return buffer;
+}
+
+// Writes every line to the console stream and the log file.
+class Logger {
+ public:
+  Logger(std::ostream& console, const fs::path& file) : console_(console), file_(file, std::ios::app) {
+    if (!file_) throw std::runtime_error("cannot open log file " + file.string());
+  }
+  void Line(const std::string& line) {
+    console_ << line << std::endl;
+    file_ << line << std::endl;
+  }
+
+ private:
+  std::ostream& console_;
+  std::ofstream file_;
+};
+
+// ---------------------------------------------------------------- checkpoints
+
+std::string StepName(int64_t step) {
+  char buffer[32];  // nine digits: steps are capped at 999'999'999 by Check()
+  std::snprintf(buffer, sizeof buffer, "checkpoint-%09lld", static_cast<long long>(step));
+  return buffer;
+}
+fs::path WeightsPath(const fs::path& dir, int64_t step) { return dir / (StepName(step) + ".safetensors"); }
+fs::path OptimPath(const fs::path& dir, int64_t step) {
+  return dir / (StepName(step) + ".optim.safetensors");
+}
+
+// Steps of the complete checkpoints in `dir` (both files present), ascending.
+std::vector<int64_t> CompleteCheckpoints(const fs::path& dir) {
+  std::vector<int64_t> steps;
+  const std::string prefix = "checkpoint-", suffix = ".safetensors";
+  for (const auto& entry : fs::directory_iterator(dir)) {
+    const std::string name = entry.path().filename().string();
+    if (name.size() != prefix.size() + 9 + suffix.size() || name.rfind(prefix, 0) != 0 ||
+        name.compare(name.size() - suffix.size(), suffix.size(), suffix) != 0) {
+      continue;
+    }
+    const std::string digits = name.substr(prefix.size(), 9);
+    if (!std::all_of(digits.begin(), digits.end(), [](char c) { return c >= '0' && c <= '9'; })) continue;
+    const int64_t step = std::stoll(digits);
+    if (fs::exists(OptimPath(dir, step))) steps.push_back(step);
+  }
+  std::sort(steps.begin(), steps.end());
+  return steps;
+}
+
+// The settings that change what a step computes: a checkpoint can only be
+// resumed by a run with the same ones (the total step count may differ).
+std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
+  std::ostringstream lr, clip;
+  lr.precision(17);
+  clip.precision(17);
+  lr << o.lr;
+  clip << o.grad_clip;
+  return {{"config", o.config},
+          {"height", std::to_string(o.height)},
+          {"width", std::to_string(o.width)},
+          {"num_sources", std::to_string(o.num_sources)},
+          {"batch_size", std::to_string(o.batch_size)},
+          {"seed", std::to_string(o.seed)},
+          {"lr", lr.str()},
+          {"lr_halve_every", std::to_string(o.lr_halve_every)},
+          {"grad_clip", clip.str()}};
+}
+
+// Adam keeps its per-parameter state under this key (LibTorch's convention).
+std::string AdamStateKey(const torch::Tensor& parameter) {
+  return c10::guts::to_string(parameter.unsafeGetTensorImpl());
+}
+
+void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,
+                    torch::optim::Adam& optimizer, const TrainOptions& options) {
+  model::NamedTensors tensors;
+  int64_t adam_step = -1;
+  for (const auto& item : net->named_parameters()) {
+    auto found = optimizer.state().find(AdamStateKey(item.value()));
+    if (found == optimizer.state().end()) continue;  // never received a gradient
+    auto& state = static_cast<torch::optim::AdamParamState&>(*found->second);
+    if (adam_step >= 0 && state.step() != adam_step) {
+      throw std::runtime_error("Adam state: parameters at different steps");
+    }
+    adam_step = state.step();
+    tensors.emplace_back("exp_avg/" + item.key(), state.exp_avg());
+    tensors.emplace_back("exp_avg_sq/" + item.key(), state.exp_avg_sq());
+  }
+  auto metadata = RunSettings(options);
+  metadata["step"] = std::to_string(step);
+  metadata["adam_step"] = std::to_string(std::max<int64_t>(adam_step, 0));
+  model::SaveSafetensors(OptimPath(dir, step).string(), tensors, metadata);
+  model::SaveModuleWeights(*net, config, WeightsPath(dir, step).string());  // marks it complete
+
+  for (int64_t older : CompleteCheckpoints(dir)) {
+    if (older >= step) continue;
+    fs::remove(WeightsPath(dir, older));
+    fs::remove(OptimPath(dir, older));
+  }
+}
+
+void LoadCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, torch::optim::Adam& optimizer,
+                    const TrainOptions& options, torch::Device device) {
+  const std::string optim_path = OptimPath(dir, step).string();
+  const auto file = model::LoadSafetensors(optim_path);
+  for (const auto& [key, value] : RunSettings(options)) {
+    const auto found = file.metadata.find(key);
+    if (found == file.metadata.end() || found->second != value) {
+      throw std::runtime_error(optim_path + ": checkpoint of a different run (" + key + " is '" +
+                               (found == file.metadata.end() ? "<missing>" : found->second) +
+                               "', this run has '" + value + "'); use another checkpoint dir");
+    }
+  }
+  const auto step_entry = file.metadata.find("adam_step");
+  if (step_entry == file.metadata.end()) throw std::runtime_error(optim_path + ": no adam_step");
+  const int64_t adam_step = std::stoll(step_entry->second);
+
+  model::LoadModuleWeights(*net, WeightsPath(dir, step).string());
+
+  std::map<std::string, torch::Tensor> stored(file.tensors.begin(), file.tensors.end());
+  optimizer.state().clear();
+  for (const auto& item : net->named_parameters()) {
+    const auto avg = stored.find("exp_avg/" + item.key());
+    const auto avg_sq = stored.find("exp_avg_sq/" + item.key());
+    if (avg == stored.end() || avg_sq == stored.end()) continue;
+    if (avg->second.sizes() != item.value().sizes() || avg_sq->second.sizes() != item.value().sizes()) {
+      throw std::runtime_error(optim_path + ": Adam state of " + item.key() + " has the wrong shape");
+    }
+    auto state = std::make_unique<torch::optim::AdamParamState>();
+    state->step(adam_step);
+    state->exp_avg(avg->second.to(device, item.value().scalar_type()));
+    state->exp_avg_sq(avg_sq->second.to(device, item.value().scalar_type()));
+    optimizer.state()[AdamStateKey(item.value())] = std::move(state);
+  }
+}
+
+// ----------------------------------------------------------------- validation
+
+std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, torch::Device device) {
+  const auto config = SynthConfigFor(options);
+  std::vector<synth::SynthSample> scenes;
+  for (int64_t i = 0; i < options.num_validation_scenes; ++i) {
+    scenes.push_back(GenerateUsableSample(config, options.validation_seed_base + i, device));
+  }
+  return scenes;
+}
+
+DepthMetrics Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                      const TrainOptions& options, double widening) {
+  const bool was_training = net->is_training();
+  net->eval();
+  torch::NoGradGuard no_grad;
+  DepthMetricSums sums;
+  for (size_t i = 0; i < scenes.size(); ++i) {
+    const auto batch = MakeBatch({scenes[i]}, widening);
+    // Same initialisation for a scene at every evaluation: the numbers differ
+    // between evaluations only because the weights do.
+    const auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
+    sums += SumDepthMetrics(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
+  }
+  net->train(was_training);
+  return Finalize(sums);
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------- public API
+
+void TrainOptions::Check(bool for_training) const {
+  auto fail = [](const std::string& what) { throw std::invalid_argument(what); };
+  ModelConfigByName(config);
+  if (height < 1 || height > 8192) fail("height must be in [1, 8192], got " + std::to_string(height));
+  if (width < 1 || width > 8192) fail("width must be in [1, 8192], got " + std::to_string(width));
+  if (num_sources < 1 || num_sources > 64) {
+    fail("num_sources must be in [1, 64], got " + std::to_string(num_sources));
+  }
+  if (batch_size < 1 || batch_size > 1024) fail("batch_size must be in [1, 1024], got " + std::to_string(batch_size));
+  if (steps < 0 || steps > 999'999'999) fail("steps must be in [0, 999999999], got " + std::to_string(steps));
+  if (!(std::isfinite(lr) && lr > 0 && lr < 1)) fail("lr must be in (0, 1), got " + std::to_string(lr));
+  if (lr_halve_every < 0) fail("lr_halve_every must be >= 0, got " + std::to_string(lr_halve_every));
+  if (!(std::isfinite(grad_clip) && grad_clip >= 0)) {
+    fail("grad_clip must be a finite number >= 0, got " + std::to_string(grad_clip));
+  }
+  ParseDevice(device);
+  if (threads < 0 || threads > 1024) fail("threads must be in [0, 1024], got " + std::to_string(threads));
+  if (checkpoint_every < 1) fail("checkpoint_every must be >= 1, got " + std::to_string(checkpoint_every));
+  if (validate_every < 0) fail("validate_every must be >= 0, got " + std::to_string(validate_every));
+  if (num_validation_scenes < 0 || num_validation_scenes > 100'000) {
+    fail("num_validation_scenes must be in [0, 100000], got " + std::to_string(num_validation_scenes));
+  }
+  if (validation_seed_base >= kTopBit - 100'000) {
+    fail("validation_seed_base must be below 2^63 - 100000 (training seeds use the top bit)");
+  }
+  if (for_training && checkpoint_dir.empty()) fail("checkpoint_dir is required for training");
+  SynthConfigFor(*this);  // the generator's own limits
+}
+
+double LearningRateAt(const TrainOptions& options, int64_t step) {
+  if (options.lr_halve_every <= 0) return options.lr;
+  return options.lr * std::pow(0.5, static_cast<double>(step / options.lr_halve_every));
+}
+
+uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index) {
+  return Mix(Mix(seed, static_cast<uint64_t>(step)), static_cast<uint64_t>(index)) | kTopBit;
+}
+
+std::string FormatMetrics(const DepthMetrics& m) {
+  char buffer[160];
+  std::snprintf(buffer, sizeof buffer, "<1%%: %.4f  <2%%: %.4f  <5%%: %.4f  AbsRel: %.4f  coverage: %.4f",
+                m.within_1, m.within_2, m.within_5, m.abs_rel, m.coverage);
+  return buffer;
+}
+
+void Train(const TrainOptions& options, std::ostream& console) {
+  options.Check(/*for_training=*/true);
+  const torch::Device device = ParseDevice(options.device);
+  if (device.is_cuda() && !torch::cuda::is_available()) {
+    throw std::invalid_argument("device " + options.device + ": CUDA is not available");
+  }
+  SetThreads(options.threads);
+  const fs::path dir = options.checkpoint_dir;
+  fs::create_directories(dir);
+  Logger log(console, dir / "train.log");
+
+  const ModelConfig config = ModelConfigByName(options.config);
+  torch::manual_seed(options.seed);  // the initial weights
+  DispMvsNet net(config);
+  net->to(device);
+  torch::optim::Adam optimizer(net->parameters(), torch::optim::AdamOptions(options.lr));
+
+  int64_t start = 0;
+  const auto checkpoints = CompleteCheckpoints(dir);
+  if (!checkpoints.empty()) {
+    start = checkpoints.back();
+    LoadCheckpoint(dir, start, net, optimizer, options, device);
+    log.Line("resumed from " + WeightsPath(dir, start).string() + " at step " + std::to_string(start));
+  }
+
+  const auto synth_config = SynthConfigFor(options);
+  const auto validation_scenes = ValidationScenes(options, device);
+  auto validate = [&](int64_t step) {
+    if (validation_scenes.empty()) return;
+    log.Line("validate step " + std::to_string(step) + "  x=1  " +
+             FormatMetrics(Validate(net, validation_scenes, options, 1.0)));
+  };
+
+  net->train();
+  const auto run_start = std::chrono::steady_clock::now();
+  int64_t last_validated = -1;
+  for (int64_t step = start; step < options.steps; ++step) {
+    const auto step_start = std::chrono::steady_clock::now();
+    const double lr = LearningRateAt(options, step);
+    for (auto& group : optimizer.param_groups()) {
+      static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
+    }
+
+    std::vector<synth::SynthSample> samples;
+    for (int64_t j = 0; j < options.batch_size; ++j) {
+      samples.push_back(GenerateUsableSample(synth_config, TrainingSampleSeed(options.seed, step, j), device));
+    }
+    const auto batch = MakeBatch(samples);
+    const auto output = net->forward(batch.input, CpuGenerator(TrainingInitSeed(options.seed, step)));
+    const auto loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
+                                          batch.input.depth_min, batch.input.depth_max);
+    optimizer.zero_grad();
+    loss.backward();
+    if (options.grad_clip > 0) torch::nn::utils::clip_grad_norm_(net->parameters(), options.grad_clip);
+    optimizer.step();
+
+    const auto now = std::chrono::steady_clock::now();
+    const double step_seconds = std::chrono::duration<double>(now - step_start).count();
+    const double mean_seconds =
+        std::chrono::duration<double>(now - run_start).count() / static_cast<double>(step + 1 - start);
+    char line[256];
+    std::snprintf(line, sizeof line, "step %lld/%lld  loss %.5f  lr %.3e  %.2f s/step  ETA %s",
+                  static_cast<long long>(step + 1), static_cast<long long>(options.steps),
+                  loss.item<double>(), lr, step_seconds,
+                  FormatDuration(mean_seconds * static_cast<double>(options.steps - step - 1)).c_str());
+    log.Line(line);
+
+    const int64_t done = step + 1;
+    if (done % options.checkpoint_every == 0 || done == options.steps) {
+      SaveCheckpoint(dir, done, net, config, optimizer, options);
+    }
+    if (options.validate_every > 0 && done % options.validate_every == 0) {
+      validate(done);
+      last_validated = done;
+    }
+  }
+  const int64_t final_step = std::max(start, options.steps);
+  if (last_validated != final_step) validate(final_step);
+  model::SaveModuleWeights(*net, config, (dir / "model.safetensors").string());
+  log.Line("wrote " + (dir / "model.safetensors").string());
+}
+
+std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, const TrainOptions& options,
+                                            const std::vector<double>& widenings) {
+  options.Check(/*for_training=*/false);
+  const torch::Device device = ParseDevice(options.device);
+  if (device.is_cuda() && !torch::cuda::is_available()) {
+    throw std::invalid_argument("device " + options.device + ": CUDA is not available");
+  }
+  if (options.num_validation_scenes < 1) throw std::invalid_argument("num_validation_scenes must be >= 1");
+  SetThreads(options.threads);
+  DispMvsNet net(model::ReadModelConfig(weights_path));
+  model::LoadModuleWeights(*net, weights_path);
+  net->to(device);
+  const auto scenes = ValidationScenes(options, device);
+  std::vector<WideningResult> results;
+  for (double x : widenings) results.push_back({x, Validate(net, scenes, options, x)});
+  return results;
+}
+
+}  // namespace dispmvs::train

@@ -1,0 +1,87 @@
+#pragma once
+// Training DispMVS on generated scenes (synth/), and evaluating weights on a
+// fixed validation set.
+//
+// Samples are generated on the fly; sample j of step s has a seed derived
+// from (seed, s, j) alone, and the network's random initialisation at step s
+// from (seed, s), so a run is deterministic and can stop and resume anywhere
+// with the same result bit for bit (on the CPU, same thread count).
+//
+// Checkpoint directory layout:
+//   checkpoint-<step>.optim.safetensors  Adam moments per parameter, step and
+//                                        run settings in the metadata
+//   checkpoint-<step>.safetensors        the weights (SaveModuleWeights)
+//   model.safetensors                    the final weights
+//   train.log                            the log lines, appended
+// Both checkpoint files are written temp-then-rename; the weights file is
+// written last, so a checkpoint counts (for resuming) only once its weights
+// file exists. Older checkpoints are removed after a newer one is complete.
+
+#include <cstdint>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "train/depth_metrics.h"
+
+namespace dispmvs::train {
+
+// Validation seeds start here; training seeds have the top bit set, so the
+// two sets are disjoint whatever the base.
+constexpr uint64_t kDefaultValidationSeedBase = 1'000'000'000;
+
+struct TrainOptions {
+  std::string config = "small";  // model::ModelConfig: "paper" or "small"
+  int64_t height = 128, width = 160;
+  int64_t num_sources = 4;  // N: views per sample = N + 1
+  int64_t batch_size = 1;
+  int64_t steps = 1000;  // total, counted from step 0 (a resumed run goes on to here)
+  double lr = 2e-4;
+  int64_t lr_halve_every = 0;  // halve lr every K steps; 0 = constant
+  double grad_clip = 1.0;      // max global gradient norm; 0 = no clipping
+  uint64_t seed = 0;
+  std::string device = "cpu";  // "cpu", "cuda" or "cuda:<i>"
+  int64_t threads = 0;         // intra-op threads; 0 = one per core
+  std::string checkpoint_dir;  // required for training
+  int64_t checkpoint_every = 100;
+  int64_t validate_every = 0;  // 0 = only at the end
+  int64_t num_validation_scenes = 8;
+  uint64_t validation_seed_base = kDefaultValidationSeedBase;
+
+  // Throws std::invalid_argument naming the first bad field. With
+  // for_training false, the training-only fields (checkpoint dir) are not
+  // required.
+  void Check(bool for_training = true) const;
+};
+
+// The learning rate in effect at `step` (0-based).
+double LearningRateAt(const TrainOptions& options, int64_t step);
+
+// Seed of sample `index` of training step `step`: top bit set, disjoint from
+// every validation seed.
+uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index);
+
+// Runs (or resumes) training as described above. Log lines go to `log` and
+// to train.log. Throws std::invalid_argument on bad options and
+// std::runtime_error on I/O failure or a checkpoint from a different run.
+void Train(const TrainOptions& options, std::ostream& log);
+
+struct WideningResult {
+  double widening = 1;  // x: depth range hint (d_min / x, d_max * x)
+  DepthMetrics metrics;
+};
+
+// Evaluates the weights file (its config comes from the file's metadata) on
+// the fixed validation scenes of `options` (size, N, count, seed base,
+// device), once per widening factor. Eval mode, no gradients; the network's
+// random initialisation is seeded per scene, so the table is reproducible.
+std::vector<WideningResult> EvaluateWeights(const std::string& weights_path,
+                                            const TrainOptions& options,
+                                            const std::vector<double>& widenings);
+
+// One line per result: "x=2  <1%: 0.123  <2%: ...  AbsRel: ...  coverage: ...".
+std::string FormatMetrics(const DepthMetrics& metrics);
+
+}  // namespace dispmvs::train

@@ -1,0 +1,191 @@
+#include "train/trainer.h"
+
+#include <filesystem>
+#include <set>
+#include <sstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "model/safetensors.h"
+#include "tests/support/temp_dir.h"
+
+namespace dispmvs::train {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::ReadFileBytes;
+using testing::TempDir;
+
+// Tiny and fast: Small network, 64x48, two sources, one thread (bit-exact
+// comparisons need a fixed thread count).
+TrainOptions TinyOptions(const fs::path& dir, int64_t steps) {
+  TrainOptions o;
+  o.config = "small";
+  o.height = 48;
+  o.width = 64;
+  o.num_sources = 2;
+  o.batch_size = 1;
+  o.steps = steps;
+  o.threads = 1;
+  o.checkpoint_dir = dir.string();
+  o.checkpoint_every = 2;
+  o.num_validation_scenes = 0;
+  return o;
+}
+
+std::string RunAndReadWeights(const TrainOptions& options) {
+  std::ostringstream log;
+  Train(options, log);
+  return ReadFileBytes(fs::path(options.checkpoint_dir) / "model.safetensors");
+}
+
+TEST(TrainerTest, SameSeedSameWeightsDifferentSeedDifferentWeights) {
+  TempDir tmp;
+  const std::string a = RunAndReadWeights(TinyOptions(tmp.path() / "a", 2));
+  const std::string b = RunAndReadWeights(TinyOptions(tmp.path() / "b", 2));
+  EXPECT_EQ(a, b);
+  auto other = TinyOptions(tmp.path() / "c", 2);
+  other.seed = 7;
+  EXPECT_NE(a, RunAndReadWeights(other));
+}
+
+TEST(TrainerTest, ResumedRunEqualsStraightRunBitForBit) {
+  TempDir tmp;
+  const std::string straight = RunAndReadWeights(TinyOptions(tmp.path() / "straight", 4));
+
+  const fs::path resumed_dir = tmp.path() / "resumed";
+  const std::string after_two = RunAndReadWeights(TinyOptions(resumed_dir, 2));
+  EXPECT_NE(after_two, straight);  // the comparison below is not vacuous
+  std::ostringstream log;
+  Train(TinyOptions(resumed_dir, 4), log);
+  EXPECT_NE(log.str().find("resumed from"), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("at step 2"), std::string::npos) << log.str();
+  EXPECT_EQ(log.str().find("step 1/4"), std::string::npos) << "steps before the checkpoint were re-run";
+  EXPECT_EQ(ReadFileBytes(resumed_dir / "model.safetensors"), straight);
+}
+
+TEST(TrainerTest, CheckpointFilesAreCompleteAndOldOnesRemoved) {
+  TempDir tmp;
+  auto options = TinyOptions(tmp.path() / "run", 3);
+  options.checkpoint_every = 1;
+  options.num_validation_scenes = 1;
+  std::ostringstream log;
+  Train(options, log);
+
+  std::set<std::string> names;
+  for (const auto& entry : fs::directory_iterator(options.checkpoint_dir)) {
+    names.insert(entry.path().filename().string());
+  }
+  const std::set<std::string> expected{"checkpoint-000000003.safetensors",
+                                       "checkpoint-000000003.optim.safetensors", "model.safetensors",
+                                       "train.log"};
+  EXPECT_EQ(names, expected);
+
+  const auto optim = model::LoadSafetensors((fs::path(options.checkpoint_dir) /
+                                             "checkpoint-000000003.optim.safetensors").string());
+  EXPECT_EQ(optim.metadata.at("step"), "3");
+  EXPECT_EQ(optim.metadata.at("adam_step"), "3");
+  ASSERT_FALSE(optim.tensors.empty());
+  for (const auto& [name, tensor] : optim.tensors) {
+    if (name.rfind("exp_avg_sq/", 0) == 0) {
+      EXPECT_GE(tensor.min().item<float>(), 0.0f) << name;
+    }
+  }
+  // The checkpoint's weights are the final weights (no step after it).
+  EXPECT_EQ(ReadFileBytes(fs::path(options.checkpoint_dir) / "checkpoint-000000003.safetensors"),
+            ReadFileBytes(fs::path(options.checkpoint_dir) / "model.safetensors"));
+
+  const std::string log_file = ReadFileBytes(fs::path(options.checkpoint_dir) / "train.log");
+  EXPECT_EQ(log_file, log.str());
+  EXPECT_NE(log_file.find("step 3/3  loss "), std::string::npos);
+  EXPECT_NE(log_file.find("validate step 3  x=1  <1%: "), std::string::npos);
+}
+
+TEST(TrainerTest, ResumingWithDifferentSettingsIsRefused) {
+  TempDir tmp;
+  auto options = TinyOptions(tmp.path() / "run", 2);
+  std::ostringstream log;
+  Train(options, log);
+  options.steps = 4;
+  options.lr = 1e-3;
+  try {
+    Train(options, log);
+    FAIL() << "expected a refusal";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("different run (lr"), std::string::npos) << e.what();
+  }
+}
+
+TEST(TrainerTest, EvaluateWeightsGivesOneRowPerWidening) {
+  TempDir tmp;
+  auto options = TinyOptions(tmp.path() / "run", 1);
+  std::ostringstream log;
+  Train(options, log);
+  options.num_validation_scenes = 1;
+  const auto rows = EvaluateWeights((fs::path(options.checkpoint_dir) / "model.safetensors").string(),
+                                    options, {1, 3});
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[1].widening, 3);
+  EXPECT_EQ(rows[0].metrics.gt_pixels, rows[1].metrics.gt_pixels);
+  EXPECT_GT(rows[0].metrics.gt_pixels, 0);
+  EXPECT_GE(rows[0].metrics.coverage, rows[0].metrics.within_5);
+}
+
+void ExpectRejected(const TrainOptions& options, const std::string& needle) {
+  try {
+    options.Check();
+    FAIL() << "expected rejection mentioning " << needle;
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
+TEST(TrainerTest, BadOptionsAreRejectedByName) {
+  const auto good = TinyOptions("some_dir", 2);
+  EXPECT_NO_THROW(good.Check());
+  auto o = good;
+  o.config = "huge";
+  ExpectRejected(o, "config");
+  o = good;
+  o.height = 0;
+  ExpectRejected(o, "height");
+  o = good;
+  o.num_sources = 0;
+  ExpectRejected(o, "num_sources");
+  o = good;
+  o.lr = -1;
+  ExpectRejected(o, "lr");
+  o = good;
+  o.grad_clip = std::nan("");
+  ExpectRejected(o, "grad_clip");
+  o = good;
+  o.device = "tpu";
+  ExpectRejected(o, "device");
+  o = good;
+  o.checkpoint_every = 0;
+  ExpectRejected(o, "checkpoint_every");
+  o = good;
+  o.checkpoint_dir.clear();
+  ExpectRejected(o, "checkpoint_dir");
+  EXPECT_NO_THROW(o.Check(/*for_training=*/false));
+}
+
+TEST(TrainerTest, LearningRateHalvesEveryKStepsAndSeedsAreDisjoint) {
+  TrainOptions o;
+  o.lr = 2e-4;
+  o.lr_halve_every = 10;
+  EXPECT_EQ(LearningRateAt(o, 0), 2e-4);
+  EXPECT_EQ(LearningRateAt(o, 9), 2e-4);
+  EXPECT_EQ(LearningRateAt(o, 10), 1e-4);
+  EXPECT_EQ(LearningRateAt(o, 25), 5e-5);
+  o.lr_halve_every = 0;
+  EXPECT_EQ(LearningRateAt(o, 1000), 2e-4);
+  // Training seeds have the top bit set; validation seeds are small.
+  EXPECT_GE(TrainingSampleSeed(0, 0, 0), uint64_t{1} << 63);
+  EXPECT_NE(TrainingSampleSeed(0, 0, 1), TrainingSampleSeed(0, 1, 0));
+  EXPECT_NE(TrainingSampleSeed(0, 1, 0), TrainingSampleSeed(1, 1, 0));
+}
+
+}  // namespace
+}  // namespace dispmvs::train
