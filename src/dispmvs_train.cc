@@ -1,7 +1,7 @@
 // dispmvs_train: trains DispMVS on generated scenes, or evaluates weights on
 // the fixed validation scenes with the depth-range hint widened x = 1, 2, 3.
 //
-//   dispmvs_train --checkpoint-dir DIR [options]     train (resumes from DIR)
+//   dispmvs_train --checkpoint_dir DIR [options]     train (resumes from DIR)
 //   dispmvs_train --evaluate WEIGHTS [options]        print the validation table
 //
 // LibTorch and the standard library only (no Boost): the command line is
@@ -23,7 +23,7 @@ namespace {
 using dispmvs::train::TrainOptions;
 
 constexpr const char* kUsage = R"(usage:
-  dispmvs_train --checkpoint-dir DIR [options]   train, resuming from DIR's latest checkpoint
+  dispmvs_train --checkpoint_dir DIR [options]   train, resuming from DIR's latest checkpoint
   dispmvs_train --evaluate WEIGHTS [options]     validation table for depth-range widening x = 1, 2, 3
 
 options (default):
@@ -33,15 +33,15 @@ options (default):
   --batch B                   samples per step (1)
   --steps S                   total steps (1000)
   --lr LR                     Adam learning rate (2e-4)
-  --lr-halve-every K          halve the learning rate every K steps, 0 = never (0)
-  --grad-clip C               max gradient norm, 0 = off (1)
+  --lr_halve_every K          halve the learning rate every K steps, 0 = never (0)
+  --grad_clip C               max gradient norm, 0 = off (1)
   --seed S                    run seed (0)
   --device cpu|cuda|cuda:I    (cpu)
   --threads T                 intra-op threads, 0 = one per core (0)
-  --checkpoint-every K        (100)
-  --validate-every K          0 = only at the end (0)
-  --val-scenes M              validation scenes (8)
-  --val-seed-base S           first validation seed (1000000000)
+  --checkpoint_every K        (100)
+  --validate_every K          0 = only at the end (0)
+  --val_scenes M              validation scenes (8)
+  --val_seed_base S           first validation seed (1000000000)
   --help                      this text
 )";
 
@@ -105,7 +105,7 @@ CommandLine Parse(int argc, char** argv) {
     if (flag.rfind("--", 0) != 0) throw std::invalid_argument("unexpected argument '" + flag + "'");
     if (i + 1 >= argc) throw std::invalid_argument("missing value after " + flag);
     const std::string value = argv[++i];
-    if (flag == "--checkpoint-dir") o.checkpoint_dir = value;
+    if (flag == "--checkpoint_dir") o.checkpoint_dir = value;
     else if (flag == "--evaluate") cl.evaluate_weights = value;
     else if (flag == "--config") o.config = value;
     else if (flag == "--height") o.height = ParseInt(flag, value);
@@ -114,22 +114,22 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--batch") o.batch_size = ParseInt(flag, value);
     else if (flag == "--steps") o.steps = ParseInt(flag, value);
     else if (flag == "--lr") o.lr = ParseDouble(flag, value);
-    else if (flag == "--lr-halve-every") o.lr_halve_every = ParseInt(flag, value);
-    else if (flag == "--grad-clip") o.grad_clip = ParseDouble(flag, value);
+    else if (flag == "--lr_halve_every") o.lr_halve_every = ParseInt(flag, value);
+    else if (flag == "--grad_clip") o.grad_clip = ParseDouble(flag, value);
     else if (flag == "--seed") o.seed = ParseUnsigned(flag, value);
     else if (flag == "--device") o.device = value;
     else if (flag == "--threads") o.threads = ParseInt(flag, value);
-    else if (flag == "--checkpoint-every") o.checkpoint_every = ParseInt(flag, value);
-    else if (flag == "--validate-every") o.validate_every = ParseInt(flag, value);
-    else if (flag == "--val-scenes") o.num_validation_scenes = ParseInt(flag, value);
-    else if (flag == "--val-seed-base") o.validation_seed_base = ParseUnsigned(flag, value);
+    else if (flag == "--checkpoint_every") o.checkpoint_every = ParseInt(flag, value);
+    else if (flag == "--validate_every") o.validate_every = ParseInt(flag, value);
+    else if (flag == "--val_scenes") o.num_validation_scenes = ParseInt(flag, value);
+    else if (flag == "--val_seed_base") o.validation_seed_base = ParseUnsigned(flag, value);
     else throw std::invalid_argument("unknown option " + flag + " (see --help)");
   }
   if (cl.evaluate_weights.empty() && o.checkpoint_dir.empty()) {
-    throw std::invalid_argument("give --checkpoint-dir DIR (train) or --evaluate WEIGHTS (see --help)");
+    throw std::invalid_argument("give --checkpoint_dir DIR (train) or --evaluate WEIGHTS (see --help)");
   }
   if (!cl.evaluate_weights.empty() && !o.checkpoint_dir.empty()) {
-    throw std::invalid_argument("--evaluate and --checkpoint-dir exclude each other");
+    throw std::invalid_argument("--evaluate and --checkpoint_dir exclude each other");
   }
   return cl;
 }
