@@ -52,6 +52,12 @@ Eigen::Matrix3d Camera::CalibrationMatrix() const {
   return K;
 }
 
+void Image::SetPose(const Eigen::Matrix3d& R_world_to_camera, const Eigen::Vector3d& t) {
+  const Eigen::Quaterniond q(R_world_to_camera);
+  qvec = Eigen::Vector4d(q.w(), q.x(), q.y(), q.z());
+  tvec = t;
+}
+
 Eigen::Matrix3d Image::RotationMatrix() const {
   // Normalised here rather than on reading, so that reading and writing a
   // model keeps the stored values bit for bit (COLMAP's files hold unit

@@ -49,6 +49,9 @@ struct Image {
   std::string name;  // relative to the images folder; may contain '/'
   std::vector<Point2D> points2D;
 
+  // Sets qvec from a world->camera rotation matrix and tvec = t.
+  void SetPose(const Eigen::Matrix3d& R_world_to_camera, const Eigen::Vector3d& t);
+
   Eigen::Matrix3d RotationMatrix() const;       // world -> camera
   Eigen::Vector3d ProjectionCenter() const;     // camera centre in world frame
   Eigen::Vector3d ViewingDirection() const;     // camera +z axis in world frame

@@ -269,6 +269,17 @@ TEST(SparseModelGeometryTest, NinetyDegreesAboutZ) {
   EXPECT_TRUE(image.ViewingDirection().isApprox(Eigen::Vector3d(0, 0, 1), 1e-12));
 }
 
+TEST(SparseModelGeometryTest, SetPoseGivesTheHandComputedQuaternion) {
+  // R = [0 -1 0; 1 0 0; 0 0 1] (90 degrees about z) is q = (cos 45°, 0, 0, sin 45°).
+  Eigen::Matrix3d R;
+  R << 0, -1, 0, 1, 0, 0, 0, 0, 1;
+  Image image;
+  image.SetPose(R, Eigen::Vector3d(1, 2, 3));
+  EXPECT_TRUE(image.qvec.isApprox(Eigen::Vector4d(std::sqrt(0.5), 0, 0, std::sqrt(0.5)), 1e-12))
+      << image.qvec.transpose();
+  EXPECT_EQ(image.tvec, Eigen::Vector3d(1, 2, 3));
+}
+
 TEST(SparseModelGeometryTest, NinetyDegreesAboutXWithUnnormalisedQuaternion) {
   // (2, 2, 0, 0) is 90° about x once normalised: R = [1 0 0; 0 0 -1; 0 1 0].
   Image image;

@@ -273,9 +273,7 @@ ExampleWorkspaceSummary WriteExampleWorkspace(const fs::path& dir,
 
     colmap_io::Image image;
     image.image_id = static_cast<image_t>(i + 1);
-    const Eigen::Quaterniond q(view.R);
-    image.qvec = Eigen::Vector4d(q.w(), q.x(), q.y(), q.z());
-    image.tvec = view.t;
+    image.SetPose(view.R, view.t);
     image.camera_id = camera.camera_id;
     image.name = view.name;
     model.images[image.image_id] = image;

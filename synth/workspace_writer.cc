@@ -190,9 +190,7 @@ colmap_io::SparseModel BuildSparseModel(const std::vector<ViewData>& views, cons
 
     colmap_io::Image image;
     image.image_id = static_cast<image_t>(i + 1);
-    const Eigen::Quaterniond q(g.R);
-    image.qvec = Eigen::Vector4d(q.w(), q.x(), q.y(), q.z());
-    image.tvec = g.t;
+    image.SetPose(g.R, g.t);
     image.camera_id = camera.camera_id;
     image.name = g.name;
     model.images[image.image_id] = image;

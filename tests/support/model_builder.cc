@@ -28,11 +28,6 @@ Eigen::Matrix3d LookAtRotation(const Eigen::Vector3d& centre, const Eigen::Vecto
   return R;
 }
 
-Eigen::Vector4d RotationToQvec(const Eigen::Matrix3d& R) {
-  const Eigen::Quaterniond q(R);
-  return Eigen::Vector4d(q.w(), q.x(), q.y(), q.z());
-}
-
 camera_t ModelBuilder::AddPinholeCamera(int width, int height, double fx, double fy, double cx,
                                         double cy) {
   colmap_io::Camera camera;
@@ -61,8 +56,7 @@ image_t ModelBuilder::AddImageWithPose(camera_t camera_id, const std::string& na
   }
   colmap_io::Image image;
   image.image_id = static_cast<image_t>(model_.images.size() + 1);
-  image.qvec = RotationToQvec(R_world_to_camera);
-  image.tvec = t_world_to_camera;
+  image.SetPose(R_world_to_camera, t_world_to_camera);
   image.camera_id = camera_id;
   image.name = name;
   model_.images[image.image_id] = image;

@@ -28,9 +28,6 @@ namespace dispmvs::testing {
 Eigen::Matrix3d LookAtRotation(const Eigen::Vector3d& centre, const Eigen::Vector3d& target,
                                const Eigen::Vector3d& up);
 
-// COLMAP's (w, x, y, z) quaternion of a rotation matrix.
-Eigen::Vector4d RotationToQvec(const Eigen::Matrix3d& R);
-
 class ModelBuilder {
  public:
   // A PINHOLE camera (model id 1) with params fx, fy, cx, cy.
