@@ -83,6 +83,20 @@ const Image* SparseModel::FindImageByName(const std::string& name) const {
   return nullptr;
 }
 
+void SparseModel::AddObservedPoint(
+    Point3D point, const std::vector<std::pair<image_t, Eigen::Vector2d>>& observations) {
+  point.track.clear();
+  for (const auto& [image_id, xy] : observations) {
+    Image& image = images.at(image_id);
+    Point2D point2D;
+    point2D.xy = xy;
+    point2D.point3D_id = point.point3D_id;
+    point.track.push_back({image_id, static_cast<uint32_t>(image.points2D.size())});
+    image.points2D.push_back(point2D);
+  }
+  points3D[point.point3D_id] = std::move(point);
+}
+
 // ---------------------------------------------------------------------------
 // Per-record checks shared by the binary and text readers
 

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <map>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace dispmvs::colmap_io {
@@ -77,6 +78,12 @@ struct SparseModel {
 
   // Returns nullptr if absent.
   const Image* FindImageByName(const std::string& name) const;
+
+  // Inserts `point` (its track is replaced) as observed in each listed image
+  // at the given pixel, appending the matching points2D to those images so
+  // that tracks and images agree. Throws std::out_of_range for an unknown image.
+  void AddObservedPoint(Point3D point,
+                        const std::vector<std::pair<image_t, Eigen::Vector2d>>& observations);
 };
 
 }  // namespace dispmvs::colmap_io

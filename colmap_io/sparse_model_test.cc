@@ -269,6 +269,35 @@ TEST(SparseModelGeometryTest, NinetyDegreesAboutZ) {
   EXPECT_TRUE(image.ViewingDirection().isApprox(Eigen::Vector3d(0, 0, 1), 1e-12));
 }
 
+TEST(SparseModelTest, AddObservedPointKeepsTracksAndImagesInAgreement) {
+  SparseModel model;
+  model.cameras[1] = MakeCamera(1, 1, 640, 480, {500, 500, 320, 240});
+  for (image_t id : {1u, 2u}) {
+    Image image;
+    image.image_id = id;
+    image.camera_id = 1;
+    image.name = "im" + std::to_string(id) + ".png";
+    image.points2D.push_back(Point2D{});  // an unmatched keypoint before ours
+    model.images[id] = image;
+  }
+  Point3D point;
+  point.point3D_id = 7;
+  point.xyz = Eigen::Vector3d(1, 2, 3);
+  point.track.push_back({99, 99});  // stale: must be replaced
+  model.AddObservedPoint(point, {{2, Eigen::Vector2d(10, 20)}, {1, Eigen::Vector2d(30, 40)}});
+
+  const Point3D& added = model.points3D.at(7);
+  ASSERT_EQ(added.track.size(), 2u);
+  EXPECT_EQ(added.track[0].image_id, 2u);
+  EXPECT_EQ(added.track[0].point2D_idx, 1u);
+  EXPECT_EQ(added.track[1].image_id, 1u);
+  EXPECT_EQ(added.track[1].point2D_idx, 1u);
+  EXPECT_EQ(model.images.at(2).points2D.at(1).xy, Eigen::Vector2d(10, 20));
+  EXPECT_EQ(model.images.at(1).points2D.at(1).point3D_id, 7u);
+  EXPECT_NO_THROW(ValidateSparseModel(model, "in-memory model"));
+  EXPECT_THROW(model.AddObservedPoint(point, {{5, Eigen::Vector2d(0, 0)}}), std::out_of_range);
+}
+
 TEST(SparseModelGeometryTest, SetPoseGivesTheHandComputedQuaternion) {
   // R = [0 -1 0; 1 0 0; 0 0 1] (90 degrees about z) is q = (cos 45°, 0, 0, sin 45°).
   Eigen::Matrix3d R;

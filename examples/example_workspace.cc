@@ -301,16 +301,8 @@ ExampleWorkspaceSummary WriteExampleWorkspace(const fs::path& dir,
     const Eigen::Vector3d colour =
         scene.Shade(*scene.Cast(first_view.centre, sample.xyz - first_view.centre));
     point.rgb = {ToByte(colour.x()), ToByte(colour.y()), ToByte(colour.z())};
-    for (const auto& [image_id, xy] : observations) {
-      colmap_io::Image& image = model.images.at(image_id);
-      colmap_io::Point2D point2D;
-      point2D.xy = xy;
-      point2D.point3D_id = point.point3D_id;
-      point.track.push_back({image_id, static_cast<uint32_t>(image.points2D.size())});
-      image.points2D.push_back(point2D);
-    }
+    model.AddObservedPoint(point, observations);
     summary.num_observations += observations.size();
-    model.points3D[point.point3D_id] = point;
   }
   summary.num_points3D = model.points3D.size();
 

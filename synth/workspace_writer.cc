@@ -232,15 +232,7 @@ colmap_io::SparseModel BuildSparseModel(const std::vector<ViewData>& views, cons
         point.xyz = world;
         point.error = 0.0;  // exact projections
         point.rgb = ColourAtSample(view.rgb, col, row);
-        for (const auto& [image_id, xy] : observations) {
-          colmap_io::Image& image = model.images.at(image_id);
-          colmap_io::Point2D point2D;
-          point2D.xy = xy;
-          point2D.point3D_id = point.point3D_id;
-          point.track.push_back({image_id, static_cast<uint32_t>(image.points2D.size())});
-          image.points2D.push_back(point2D);
-        }
-        model.points3D[point.point3D_id] = point;
+        model.AddObservedPoint(point, observations);
       }
     }
   }

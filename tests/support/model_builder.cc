@@ -69,15 +69,9 @@ point3D_t ModelBuilder::AddPoint(const Eigen::Vector3d& xyz,
   point.point3D_id = next_point3D_id_++;
   point.xyz = xyz;
   point.error = 0.0;
-  for (const image_t image_id : observers) {
-    auto& image = model_.images.at(image_id);
-    colmap_io::Point2D point2D;
-    point2D.xy = Project(image_id, xyz);
-    point2D.point3D_id = point.point3D_id;
-    point.track.push_back({image_id, static_cast<uint32_t>(image.points2D.size())});
-    image.points2D.push_back(point2D);
-  }
-  model_.points3D[point.point3D_id] = point;
+  std::vector<std::pair<image_t, Eigen::Vector2d>> observations;
+  for (const image_t image_id : observers) observations.emplace_back(image_id, Project(image_id, xyz));
+  model_.AddObservedPoint(point, observations);
   return point.point3D_id;
 }
 
