@@ -127,6 +127,29 @@ ResizedImage ReadImageForCamera(const std::filesystem::path& path, const Camera&
   return ResizeToMaxImageSize(image, K, max_image_size);
 }
 
+ResizedImage ResampleToDenseIndexGrid(const cv::Mat& image, const Eigen::Matrix3d& K,
+                                      const cv::Size& size) {
+  if (image.empty() || size.width < 1 || size.height < 1) {
+    throw std::invalid_argument("ResampleToDenseIndexGrid: empty image or size");
+  }
+  cv::Mat resized;
+  if (size == image.size()) {
+    resized = image;
+  } else {
+    const bool shrinking = size.width <= image.cols && size.height <= image.rows;
+    cv::resize(image, resized, size, 0.0, 0.0, shrinking ? cv::INTER_AREA : cv::INTER_LINEAR);
+  }
+  // OpenCV samples at integer pixel centres; the inverse map reads the
+  // source at (col - 0.5, row - 0.5), which is continuous position (col, row)
+  // in COLMAP's convention.
+  const cv::Matx23d shift(1.0, 0.0, -0.5, 0.0, 1.0, -0.5);
+  ResizedImage result;
+  cv::warpAffine(resized, result.image, shift, size, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
+                 cv::BORDER_REPLICATE);
+  result.K = ScaleIntrinsics(K, image.size(), size);
+  return result;
+}
+
 Eigen::Matrix3d ToPixelIndexConvention(const Eigen::Matrix3d& K_colmap) {
   Eigen::Matrix3d K = K_colmap;
   K(0, 2) -= 0.5;

@@ -63,6 +63,20 @@ ResizedImage ResizeToMaxImageSize(const cv::Mat& image, const Eigen::Matrix3d& K
 ResizedImage ReadImageForCamera(const std::filesystem::path& path, const Camera& camera,
                                 int max_image_size);
 
+// `image` (intrinsics K, COLMAP convention) brought to `size` and resampled
+// onto COLMAP's dense index grid: pixel (col, row) of the result holds the
+// colour at continuous position (col, row) of the resized image, i.e. half a
+// pixel up and left of that pixel's centre (bilinear, border replicated).
+// With this resampling the returned K (COLMAP's, scaled to `size`) is the
+// exact intrinsics of the result in the pixel-index convention, so a network
+// that treats pixel (col, row) as the ray K^-1 (col, row, 1) both matches
+// with exact geometry and produces depth maps in the indexing COLMAP's
+// PatchMatch and stereo_fusion use, without resampling the depth afterwards.
+// Downscaling first averages areas (no aliasing), as ResizeToMaxImageSize.
+// Throws std::invalid_argument for an empty image or size.
+ResizedImage ResampleToDenseIndexGrid(const cv::Mat& image, const Eigen::Matrix3d& K,
+                                      const cv::Size& size);
+
 // COLMAP intrinsics -> intrinsics for pixel-index coordinates, where pixel
 // (col, row) sits at (col, row) instead of (col + 0.5, row + 0.5): cx - 0.5 and
 // cy - 0.5, focal lengths unchanged. Apply it AFTER any scaling (the shift is

@@ -268,5 +268,39 @@ TEST(ImageIoTest, PixelIndexConventionShiftsPrincipalPointByHalfAPixel) {
   EXPECT_NEAR(index.y() / index.z(), 0.0, 1e-12);
 }
 
+// A linear ramp v = a x + b y + c over COLMAP's continuous coordinates (pixel
+// (col, row) covers [col, col+1) x [row, row+1), its mean is the value at the
+// centre). After resampling, pixel (col, row) must hold the ramp at (col, row)
+// of the resized image, away from the replicated border.
+TEST(ImageIoTest, DenseIndexGridHoldsColoursAtIntegerPositions) {
+  const double a = 0.01, b = 0.004, c = 0.1;
+  cv::Mat ramp(48, 64, CV_32FC3);
+  for (int row = 0; row < ramp.rows; ++row) {
+    for (int col = 0; col < ramp.cols; ++col) {
+      const float v = static_cast<float>(a * (col + 0.5) + b * (row + 0.5) + c);
+      ramp.at<cv::Vec3f>(row, col) = cv::Vec3f(v, 2 * v, 0.5f * v);
+    }
+  }
+  Eigen::Matrix3d K;
+  K << 50, 0, 32, 0, 50, 24, 0, 0, 1;
+  for (const cv::Size size : {cv::Size(64, 48), cv::Size(32, 24), cv::Size(16, 12)}) {
+    const ResizedImage result = ResampleToDenseIndexGrid(ramp, K, size);
+    ASSERT_EQ(result.image.size(), size);
+    const double s = static_cast<double>(size.width) / ramp.cols;
+    EXPECT_DOUBLE_EQ(result.K(0, 2), 32 * s);
+    EXPECT_DOUBLE_EQ(result.K(0, 0), 50 * s);
+    for (int row = 1; row < size.height; ++row) {
+      for (int col = 1; col < size.width; ++col) {
+        // Continuous (col, row) of the resized image is (col, row) / s of the original.
+        const double expected = a * col / s + b * row / s + c;
+        const cv::Vec3f got = result.image.at<cv::Vec3f>(row, col);
+        ASSERT_NEAR(got[0], expected, 1e-5) << size << " " << row << " " << col;
+        ASSERT_NEAR(got[1], 2 * expected, 2e-5);
+      }
+    }
+  }
+  EXPECT_THROW(ResampleToDenseIndexGrid(cv::Mat(), K, cv::Size(4, 4)), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace dispmvs::colmap_io

@@ -3,6 +3,7 @@
 
 #include "colmap_io/sparse_model.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <stdexcept>
@@ -74,6 +75,22 @@ Eigen::Vector3d Image::ProjectionCenter() const {
 Eigen::Vector3d Image::ViewingDirection() const {
   // The camera's +z axis expressed in the world frame is the third row of R.
   return RotationMatrix().row(2).transpose();
+}
+
+std::vector<image_t> SparseModel::DenseImageOrder() const {
+  std::vector<image_t> order;
+  if (image_file_order.size() == images.size()) {
+    order = image_file_order;
+    std::vector<image_t> sorted = order;
+    std::sort(sorted.begin(), sorted.end());
+    const bool same_set = std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end() &&
+                          std::all_of(sorted.begin(), sorted.end(),
+                                      [&](image_t id) { return images.count(id) > 0; });
+    if (same_set) return order;
+    order.clear();
+  }
+  for (const auto& [id, image] : images) order.push_back(id);
+  return order;
 }
 
 const Image* SparseModel::FindImageByName(const std::string& name) const {

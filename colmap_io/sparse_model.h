@@ -76,6 +76,17 @@ struct SparseModel {
   std::map<image_t, Image> images;
   std::map<point3D_t, Point3D> points3D;
 
+  // Image ids in the order the readers met them in images.bin / images.txt.
+  // COLMAP's dense stage numbers images in this order (mvs::Model takes them
+  // in registration order, which is file order), and fused.ply.vis stores
+  // those numbers. Empty for models built in code: see DenseImageOrder().
+  std::vector<image_t> image_file_order;
+
+  // The image ids in COLMAP's dense numbering: image_file_order when it lists
+  // exactly the model's images, else all ids in ascending order (what our
+  // writers produce, so a model written by us and read by COLMAP agrees).
+  std::vector<image_t> DenseImageOrder() const;
+
   // Returns nullptr if absent.
   const Image* FindImageByName(const std::string& name) const;
 

@@ -88,6 +88,7 @@ void ReadCamerasBinary(std::istream& in, const std::string& source_name, SparseM
 void ReadImagesBinary(std::istream& in, const std::string& source_name, SparseModel* model) {
   BinaryReader reader(in, source_name);
   model->images.clear();
+  model->image_file_order.clear();
   const uint64_t count = reader.ReadCount("number of images", kMinImageBytes);
   for (uint64_t i = 0; i < count; ++i) {
     reader.SetRecord("image", i);
@@ -109,9 +110,11 @@ void ReadImagesBinary(std::istream& in, const std::string& source_name, SparseMo
     if (const std::string problem = internal::CheckImage(image); !problem.empty()) {
       reader.Fail(problem);
     }
-    if (!model->images.emplace(image.image_id, std::move(image)).second) {
+    const image_t image_id = image.image_id;
+    if (!model->images.emplace(image_id, std::move(image)).second) {
       reader.Fail("duplicate image_id");
     }
+    model->image_file_order.push_back(image_id);
   }
   reader.ExpectEnd(count);
 }

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <functional>
 #include <limits>
 #include <new>
@@ -386,6 +387,40 @@ TEST(SparseModelIoTest, BinaryLayoutMatchesHandBuiltBytes) {
   EXPECT_EQ(ReadFileBytes(dir.path() / "cameras.bin"), cameras.str());
   EXPECT_EQ(ReadFileBytes(dir.path() / "images.bin"), images.str());
   EXPECT_EQ(ReadFileBytes(dir.path() / "points3D.bin"), points.str());
+}
+
+// COLMAP numbers the images of a dense workspace in images.bin's file order
+// (fused.ply.vis stores those numbers), which need not be id order.
+TEST(SparseModelIoTest, ReadersRecordTheFileOrderOfImages) {
+  SparseModel m;
+  m.cameras[1] = MakeCamera(1, 1, 64, 48, {50, 51, 32, 24});
+  TempDir dir;
+  WriteSparseModelBinary(m, dir.path());  // cameras.bin and an empty points3D.bin
+  Bytes images;
+  images.U64(3);
+  for (const uint32_t id : {7u, 2u, 5u}) {
+    images.U32(id).F64(1).F64(0).F64(0).F64(0).F64(0).F64(0).F64(0).U32(1);
+    images.Str("im" + std::to_string(id) + ".png").U64(0);
+  }
+  {
+    std::ofstream out(dir.path() / "images.bin", std::ios::binary);
+    out << images.str();
+  }
+  const SparseModel binary = ReadSparseModelBinary(dir.path());
+  EXPECT_EQ(binary.image_file_order, (std::vector<image_t>{7, 2, 5}));
+  EXPECT_EQ(binary.DenseImageOrder(), (std::vector<image_t>{7, 2, 5}));
+
+  // The text reader too (our text writer writes ascending ids).
+  TempDir text;
+  WriteSparseModelText(binary, text.path());
+  EXPECT_EQ(ReadSparseModelText(text.path()).image_file_order, (std::vector<image_t>{2, 5, 7}));
+
+  // A model built in code, or one whose recorded order went stale, uses ids.
+  SparseModel edited = binary;
+  edited.images.erase(2);
+  EXPECT_EQ(edited.DenseImageOrder(), (std::vector<image_t>{5, 7}));
+  edited.image_file_order.clear();
+  EXPECT_EQ(edited.DenseImageOrder(), (std::vector<image_t>{5, 7}));
 }
 
 TEST(SparseModelIoTest, TextLinesMatchColmapsLayout) {

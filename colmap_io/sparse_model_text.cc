@@ -163,6 +163,7 @@ void ReadCamerasText(std::istream& in, const std::string& source_name, SparseMod
 void ReadImagesText(std::istream& in, const std::string& source_name, SparseModel* model) {
   LineReader reader(in, source_name);
   model->images.clear();
+  model->image_file_order.clear();
   std::string line;
   while (reader.NextData(&line)) {
     // Line 1: IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME
@@ -213,6 +214,7 @@ void ReadImagesText(std::istream& in, const std::string& source_name, SparseMode
     }
     const image_t id = image.image_id;
     model->images.emplace(id, std::move(image));
+    model->image_file_order.push_back(id);
   }
 }
 

@@ -16,8 +16,8 @@
 
 #include "colmap_io/sparse_model.h"
 #include "colmap_io/workspace.h"
-#include "examples/example_scene.h"
 #include "examples/example_workspace.h"
+#include "examples/surface_distance.h"
 #include "tests/support/temp_dir.h"
 
 namespace dispmvs::examples {
@@ -66,27 +66,6 @@ std::vector<Eigen::Vector3d> ReadColmapFusedPly(const fs::path& path) {
   return points;
 }
 
-// Distances of fused points from the scene's surfaces, measured along the
-// ray from the camera that sees each point best: |t - 1| * |X - C| for the
-// ray C + t (X - C), minimised over the views (a point hidden from one view
-// is seen by others).
-std::vector<double> SurfaceDistances(const std::vector<Eigen::Vector3d>& points,
-                                     const SparseModel& model) {
-  const ExampleScene scene(kSeed);  // geometry does not depend on the seed
-  std::vector<double> distances;
-  for (const Eigen::Vector3d& x : points) {
-    double best = std::numeric_limits<double>::infinity();
-    for (const auto& [image_id, image] : model.images) {
-      const Eigen::Vector3d centre = image.ProjectionCenter();
-      const auto hit = scene.Cast(centre, x - centre);
-      if (hit) best = std::min(best, std::abs(hit->t - 1.0) * (x - centre).norm());
-    }
-    distances.push_back(best);
-  }
-  std::sort(distances.begin(), distances.end());
-  return distances;
-}
-
 // Fuses the ground truth with the real `colmap stereo_fusion` (exported as
 // COLMAP "geometric" maps) and returns the sorted surface distances of the
 // fused points; empty when colmap is not installed.
@@ -112,7 +91,7 @@ std::vector<double> FuseGroundTruthWithColmap(GroundTruthSampling sampling) {
   const int status = std::system(command.c_str());
   EXPECT_EQ(status, 0) << testing::ReadFileBytes(root / "fusion.log");
   if (status != 0) return {};
-  return SurfaceDistances(ReadColmapFusedPly(root / "fused.ply"), model);
+  return SortedSurfaceDistances(ReadColmapFusedPly(root / "fused.ply"), model);
 }
 
 bool ColmapIsInstalled() { return std::system("command -v colmap > /dev/null 2>&1") == 0; }

@@ -1,186 +1,218 @@
 // dispmvs_colmap: DispMVS dense reconstruction for a COLMAP dense workspace
-// (the folder `colmap image_undistorter` writes).
+// (the folder `colmap image_undistorter` writes), in place of
+// `colmap patch_match_stereo` + `colmap stereo_fusion`.
 //
-// The program is organised as the dense MVS step it will become: parse and
-// check Options, open the workspace, plan the stereo problems (reference
-// image, source images, depth-range hint), then run the passes. Today only
-// the planning exists and the plan is printed; the photometric pass (network
-// inference), the geometric pass (multi-view consistency filtering) and the
-// fusion are later steps that consume the same DensePlan.
-//
-// Errors of any kind are printed as "error: <message>" on stderr with exit
-// status 1.
+// Parse and check Options, plan the stereo problems (dense_plan.h), then run
+// the passes (dense_passes.h). Errors that stop the run print
+// "error: <message>" on stderr with exit status 1; a view that fails is
+// reported, the others go on, and the exit status is 1 at the end.
 
 #include <boost/program_options.hpp>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <exception>
 #include <filesystem>
+#include <fstream>
 #include <iostream>
-#include <map>
 #include <optional>
-#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
-#include "colmap_io/depth_range.h"
 #include "colmap_io/error.h"
-#include "colmap_io/sparse_model.h"
-#include "colmap_io/stereo_config.h"
-#include "colmap_io/view_selection.h"
 #include "colmap_io/workspace.h"
+#include "fusion/geometric_filter.h"
+#include "src/dense_passes.h"
+#include "src/dense_plan.h"
+#include "src/depth_estimator.h"
 
 namespace {
 
+namespace fs = std::filesystem;
 namespace po = boost::program_options;
-using namespace dispmvs::colmap_io;
+using namespace dispmvs;
 
 constexpr const char* kDescription = R"(dispmvs_colmap: DispMVS dense reconstruction for a COLMAP workspace.
 
-Reads a dense workspace as written by `colmap image_undistorter`
-(WORKSPACE/images, WORKSPACE/sparse, WORKSPACE/stereo) and plans one stereo
-problem per reference image: its source views and its depth-range hint.
+Usage: dispmvs_colmap --workspace_path WS [options]
 
-Source views come from WORKSPACE/stereo/patch-match.cfg when it exists
-(`__auto__, N`, `__all__` or an explicit list per reference image, as in
-COLMAP); without it, every image of the sparse model is a reference with
-`__auto__` selection. `__auto__` keeps the images whose triangulation angle
-with the reference reaches --min_triangulation_angle and takes those sharing
-the most sparse points, at most min(N, --max_num_src_images) of them.
+WS is a dense workspace as written by `colmap image_undistorter` (WS/images,
+WS/sparse, WS/stereo). The default mode runs three passes, like
+`colmap patch_match_stereo` followed by `colmap stereo_fusion`:
+  1. photometric: the DispMVS network per reference image of
+     WS/stereo/patch-match.cfg (without it: every image, `__auto__`
+     selection) -> WS/stereo/{depth,normal,confidence}_maps/NAME.dispmvs.photometric.bin
+  2. geometric: multi-view geometric-consistency filtering of those maps
+     -> NAME.dispmvs.geometric.bin (0 = filtered out)
+  3. fusion: consistent pixels averaged -> fused.ply + fused.ply.vis, which
+     COLMAP's poisson_mesher and delaunay_mesher accept.
+PatchMatch's maps (NAME.photometric.bin, NAME.geometric.bin) are never
+touched. Views whose photometric maps exist are skipped (resume after an
+interruption; --overwrite recomputes); files are written under a temporary
+name and renamed, so an interrupted run leaves no half-written file.
 
-The depth range of an image comes from the sparse points it sees (robust
-percentiles widened by a stretch ratio, as COLMAP computes it). DispMVS uses it
-only as a hint for its random initialisation: nothing is clipped to it. Images
-seeing fewer than --depth_min_num_points points get the union of the other
-images' ranges (marked "fallback").
+Depth range: each image's range comes from the sparse points it sees (COLMAP's
+percentiles and margin), or from --depth_min/--depth_max. DispMVS uses it only
+to draw its random initialisation: nothing outside it is clipped or dropped.
 
-This version prints the plan, one tab-separated line per reference image:
-  NAME  d_min=..  d_max=..  points=..  [fallback]  sources=NAME1,NAME2,...
-Depth-map estimation and fusion are not implemented yet.
+Modes (--mode):
+  full         photometric, geometric and fusion (default)
+  photometric  the network only, e.g. one shard of a batch job (--shard)
+  fuse         geometric filtering + fusion of existing photometric maps,
+               e.g. with other thresholds
+  export       copy our maps under COLMAP's names into --export_path, a
+               sibling workspace linking to WS's images and sparse model, for
+               `colmap stereo_fusion --input_type geometric|photometric`
+  plan         print the plan (one line per reference image) and stop
 
 Options)";
 
-// Everything the command line controls. Check() validates the values before
-// any work starts, naming the option at fault.
 struct Options {
   std::string workspace_path;
-  // DispMVS was trained and evaluated on DTU and BlendedMVS with N = 5 views,
-  // i.e. one reference and 4 sources (paper, Sec. 4). More sources cost GPU
-  // memory linearly and the network never saw them; COLMAP's own `__auto__, 20`
-  // is tuned for PatchMatch, which benefits from many more views.
-  int max_num_src_images = 4;
-  // COLMAP's PatchMatchStereo.min_triangulation_angle default, degrees.
-  double min_triangulation_angle = 1.0;
-  // Depth-range hint, see colmap_io/depth_range.h (defaults are COLMAP's).
-  double depth_min_percentile = 0.01;
-  double depth_max_percentile = 0.99;
-  double depth_stretch_ratio = 0.25;
-  int depth_min_num_points = 1;
+  std::string mode = "full";
+  dense::PlanOptions plan;
+  dense::PhotometricOptions photometric;
+  fusion::GeometricFilterOptions filter;
+  std::string output_path;  // default WS/fused.ply
+  std::string export_path;
+  std::string image_list_path;
+  std::string shard;  // "K/N"
 
-  // Throws std::invalid_argument naming the command-line option.
   void Check() const;
-
-  ViewSelectionOptions ViewSelection() const;
-  DepthRangeOptions DepthRange() const;
 };
 
-void RequireFinite(double value, const char* option) {
-  if (!std::isfinite(value)) {
-    throw std::invalid_argument(std::string("--") + option + " must be a finite number");
+// "K/N" with 0 <= K < N.
+std::pair<int, int> ParseShard(const std::string& text) {
+  int index = -1, count = -1;
+  char slash = 0, extra = 0;
+  if (std::sscanf(text.c_str(), "%d%c%d%c", &index, &slash, &count, &extra) != 3 || slash != '/' ||
+      count < 1 || index < 0 || index >= count) {
+    throw std::invalid_argument("--shard must be K/N with 0 <= K < N (e.g. 0/4), got '" + text +
+                                "'");
   }
+  return {index, count};
 }
 
 void Options::Check() const {
   if (workspace_path.empty()) throw std::invalid_argument("--workspace_path must not be empty");
-  if (max_num_src_images < 1) {
-    throw std::invalid_argument("--max_num_src_images must be at least 1, got " +
-                                std::to_string(max_num_src_images));
+  const std::vector<std::string> modes = {"full", "photometric", "fuse", "export", "plan"};
+  if (std::find(modes.begin(), modes.end(), mode) == modes.end()) {
+    throw std::invalid_argument("--mode must be full, photometric, fuse, export or plan, got '" +
+                                mode + "'");
   }
-  if (static_cast<std::size_t>(max_num_src_images) > kMaxAutoSources) {
-    throw std::invalid_argument("--max_num_src_images must be at most " +
-                                std::to_string(kMaxAutoSources));
+  plan.Check();
+  if (mode == "full" || mode == "photometric") photometric.Check();
+  // The filter's own Check() names its fields; these name the options.
+  if (!(filter.max_reprojection_error > 0) || !std::isfinite(filter.max_reprojection_error)) {
+    throw std::invalid_argument("--max_reproj_error must be a positive number of pixels");
   }
-  RequireFinite(min_triangulation_angle, "min_triangulation_angle");
-  if (min_triangulation_angle < 0.0 || min_triangulation_angle > 90.0) {
-    throw std::invalid_argument("--min_triangulation_angle must be in [0, 90] degrees");
+  if (!(filter.max_relative_depth_error > 0) || !std::isfinite(filter.max_relative_depth_error)) {
+    throw std::invalid_argument("--max_depth_error must be a positive fraction");
   }
-  RequireFinite(depth_min_percentile, "depth_min_percentile");
-  RequireFinite(depth_max_percentile, "depth_max_percentile");
-  RequireFinite(depth_stretch_ratio, "depth_stretch_ratio");
-  if (depth_min_percentile < 0.0 || depth_min_percentile > 1.0 || depth_max_percentile < 0.0 ||
-      depth_max_percentile > 1.0) {
+  if (filter.min_consistent_views < 0) {
+    throw std::invalid_argument("--min_num_consistent must be >= 0");
+  }
+  if (!(filter.min_confidence >= 0 && filter.min_confidence <= 1)) {
+    throw std::invalid_argument("--min_confidence must be in [0, 1]");
+  }
+  filter.Check();
+  if (mode == "export" && export_path.empty()) {
+    throw std::invalid_argument("--mode export needs --export_path");
+  }
+  if (!shard.empty()) ParseShard(shard);
+  if ((!shard.empty() || !image_list_path.empty()) && mode != "photometric" && mode != "plan") {
     throw std::invalid_argument(
-        "--depth_min_percentile and --depth_max_percentile are fractions in [0, 1]");
+        "--shard and --image_list split the photometric pass: use them with --mode photometric, "
+        "then run --mode fuse once every part is done");
   }
-  if (depth_min_percentile > depth_max_percentile) {
-    throw std::invalid_argument("--depth_min_percentile must not exceed --depth_max_percentile");
-  }
-  if (depth_stretch_ratio < 0.0 || depth_stretch_ratio >= 1.0) {
-    throw std::invalid_argument("--depth_stretch_ratio must be in [0, 1)");
-  }
-  if (depth_min_num_points < 1) {
-    throw std::invalid_argument("--depth_min_num_points must be at least 1");
-  }
-  // The library structs check themselves too; this catches any drift between
-  // the two sets of rules.
-  ViewSelection().Check();
-  DepthRange().Check();
 }
 
-ViewSelectionOptions Options::ViewSelection() const {
-  ViewSelectionOptions options;
-  options.min_triangulation_angle_deg = min_triangulation_angle;
-  return options;
-}
+#ifndef DISPMVS_DEFAULT_MODEL_PATH
+#define DISPMVS_DEFAULT_MODEL_PATH "models/dispmvs_small.safetensors"
+#endif
 
-DepthRangeOptions Options::DepthRange() const {
-  DepthRangeOptions options;
-  options.min_percentile = depth_min_percentile;
-  options.max_percentile = depth_max_percentile;
-  options.stretch_ratio = depth_stretch_ratio;
-  options.min_num_points = static_cast<std::size_t>(depth_min_num_points);
-  return options;
-}
-
-// Parses the command line. Returns nothing when --help was given (the help
-// has then been printed); throws on unknown options or malformed values.
 std::optional<Options> ParseCommandLine(int argc, char** argv) {
-  Options options;
+  Options o;
+  o.photometric.estimator.model_path = DISPMVS_DEFAULT_MODEL_PATH;
   po::options_description description(kDescription);
+  // clang-format off
   description.add_options()
       ("help,h", "Print this help and exit.")
-      ("workspace_path", po::value<std::string>(&options.workspace_path),
+      ("workspace_path", po::value<std::string>(&o.workspace_path),
        "COLMAP dense workspace (required): the output folder of image_undistorter.")
-      ("max_num_src_images",
-       po::value<int>(&options.max_num_src_images)->default_value(options.max_num_src_images),
-       "Most source views per reference image for `__auto__` selection (N = 5 views "
-       "in total, as DispMVS was trained). `__all__` and explicit lists in "
-       "patch-match.cfg are used as written.")
-      ("min_triangulation_angle",
-       po::value<double>(&options.min_triangulation_angle)
-           ->default_value(options.min_triangulation_angle, "1"),
-       "Degrees; `__auto__` ignores source views whose triangulation angle with the "
-       "reference (75th percentile over shared points) is smaller.")
-      ("depth_min_percentile",
-       po::value<double>(&options.depth_min_percentile)
-           ->default_value(options.depth_min_percentile, "0.01"),
-       "Fraction in [0, 1]: the percentile of the sparse depths taken as the low end "
-       "of the depth-range hint.")
-      ("depth_max_percentile",
-       po::value<double>(&options.depth_max_percentile)
-           ->default_value(options.depth_max_percentile, "0.99"),
-       "Fraction in [0, 1]: the percentile taken as the high end.")
-      ("depth_stretch_ratio",
-       po::value<double>(&options.depth_stretch_ratio)
-           ->default_value(options.depth_stretch_ratio, "0.25"),
+      ("mode", po::value<std::string>(&o.mode)->default_value(o.mode),
+       "full, photometric, fuse, export or plan (see above).")
+      ("model_path", po::value<std::string>(&o.photometric.estimator.model_path)
+           ->default_value(o.photometric.estimator.model_path),
+       "Network weights (.safetensors written by dispmvs_train); the default is the "
+       "model shipped in the source tree.")
+      ("max_image_size", po::value<int>(&o.photometric.max_image_size)->default_value(-1),
+       "Downscale images whose larger side exceeds this (maps are written at that "
+       "size, as PatchMatch does); -1 = full size.")
+      ("max_num_src_images", po::value<int>(&o.plan.max_num_src_images)
+           ->default_value(o.plan.max_num_src_images),
+       "Most source views per reference for `__auto__` selection (DispMVS was trained "
+       "with 4). `__all__` and explicit lists in patch-match.cfg are used as written.")
+      ("min_triangulation_angle", po::value<double>(&o.plan.min_triangulation_angle)
+           ->default_value(o.plan.min_triangulation_angle, "1"),
+       "Degrees; `__auto__` ignores sources whose triangulation angle with the reference "
+       "(75th percentile over shared points) is smaller.")
+      ("depth_min", po::value<double>(&o.plan.depth_min)->default_value(-1),
+       "Depth-range hint for every image (with --depth_max) instead of the sparse points'.")
+      ("depth_max", po::value<double>(&o.plan.depth_max)->default_value(-1),
+       "See --depth_min.")
+      ("depth_min_percentile", po::value<double>(&o.plan.depth_min_percentile)
+           ->default_value(o.plan.depth_min_percentile, "0.01"),
+       "Percentile (fraction) of an image's sparse depths taken as the low end of its hint.")
+      ("depth_max_percentile", po::value<double>(&o.plan.depth_max_percentile)
+           ->default_value(o.plan.depth_max_percentile, "0.99"),
+       "Percentile taken as the high end.")
+      ("depth_stretch_ratio", po::value<double>(&o.plan.depth_stretch_ratio)
+           ->default_value(o.plan.depth_stretch_ratio, "0.25"),
        "In [0, 1): the hint is [(1 - s) * low, (1 + s) * high].")
-      ("depth_min_num_points",
-       po::value<int>(&options.depth_min_num_points)
-           ->default_value(options.depth_min_num_points),
-       "Images seeing fewer sparse points use the fallback range.");
+      ("depth_min_num_points", po::value<int>(&o.plan.depth_min_num_points)
+           ->default_value(o.plan.depth_min_num_points),
+       "Images seeing fewer sparse points use the union of the others' ranges.")
+      ("coarse_iterations", po::value<int>(&o.photometric.estimator.coarse_iterations)
+           ->default_value(0),
+       "GRU iterations at 1/16 resolution; 0 = as trained.")
+      ("fine_iterations", po::value<int>(&o.photometric.estimator.fine_iterations)
+           ->default_value(0),
+       "GRU iterations at 1/4 resolution; 0 = as trained.")
+      ("device", po::value<std::string>(&o.photometric.estimator.device)
+           ->default_value(o.photometric.estimator.device),
+       "cpu, cuda or cuda:<gpu index> (needs a CUDA build of LibTorch).")
+      ("threads", po::value<int>(&o.photometric.estimator.threads)->default_value(0),
+       "CPU threads for the network; 0 = one per core.")
+      ("seed", po::value<uint64_t>(&o.photometric.seed)->default_value(0),
+       "Seed of the random initialisation (per image, so results do not depend on order "
+       "or sharding).")
+      ("image_list", po::value<std::string>(&o.image_list_path),
+       "File with one reference image name per line: only those (--mode photometric).")
+      ("shard", po::value<std::string>(&o.shard),
+       "K/N: only every N-th reference starting at K (--mode photometric), e.g. "
+       "--shard $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT.")
+      ("overwrite", po::bool_switch(&o.photometric.overwrite),
+       "Recompute photometric maps that already exist.")
+      ("max_reproj_error", po::value<double>(&o.filter.max_reprojection_error)
+           ->default_value(o.filter.max_reprojection_error, "1"),
+       "Geometric filter and fusion: largest forward-backward reprojection error, pixels.")
+      ("max_depth_error", po::value<double>(&o.filter.max_relative_depth_error)
+           ->default_value(o.filter.max_relative_depth_error, "0.01"),
+       "Largest relative depth difference between a pixel and its reprojection.")
+      ("min_num_consistent", po::value<int>(&o.filter.min_consistent_views)
+           ->default_value(o.filter.min_consistent_views),
+       "Source views that must agree for a pixel to be kept.")
+      ("min_confidence", po::value<double>(&o.filter.min_confidence)->default_value(0),
+       "Drop pixels whose network confidence (in [0, 1]) is lower.")
+      ("output_path", po::value<std::string>(&o.output_path),
+       "Fused point cloud; default WS/fused.ply (its visibility goes to OUTPUT.vis).")
+      ("export_path", po::value<std::string>(&o.export_path),
+       "Target workspace of --mode export.");
+  // clang-format on
 
   po::variables_map values;
   po::store(po::parse_command_line(argc, argv, description), values);
@@ -193,127 +225,89 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   if (values.count("workspace_path") == 0) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
   }
-  options.Check();
-  return options;
+  o.Check();
+  return o;
 }
 
-// What the dense step will work on. Built once, used by every pass.
-struct DensePlan {
-  SparseModel model;
-  // Where the problems came from: the patch-match.cfg path, or a note that
-  // they were generated.
-  std::string problems_source;
-  std::vector<StereoProblem> problems;
-  std::map<image_t, DepthRange> depth_ranges;  // every image of the model
-  DepthRange fallback_depth_range;
-};
-
-// Dense MVS needs undistorted images: pinhole cameras only.
-void CheckPinholeCameras(const SparseModel& model, const Workspace& workspace) {
-  for (const auto& [image_id, image] : model.images) {
-    const auto camera = model.cameras.find(image.camera_id);
-    if (camera == model.cameras.end() || !camera->second.IsPinhole()) {
-      throw IoError(workspace.SparseDir().string(),
-                    "image \"" + image.name +
-                        "\" does not use a PINHOLE or SIMPLE_PINHOLE camera; dense "
-                        "reconstruction needs the output of `colmap image_undistorter`");
-    }
+std::vector<std::string> ReadImageList(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw colmap_io::IoError(path, "cannot open the image list");
+  std::vector<std::string> names;
+  std::string line;
+  while (std::getline(in, line)) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (!line.empty() && line[0] != '#') names.push_back(line);
   }
+  if (names.empty()) throw colmap_io::IoError(path, "the image list names no image");
+  return names;
 }
 
-// The stereo problems: from patch-match.cfg, or `__auto__` for every image.
-// Applies --max_num_src_images to `__auto__` entries.
-void PlanProblems(const Workspace& workspace, const Options& options, DensePlan* plan) {
-  const std::filesystem::path config_path = workspace.PatchMatchConfigPath();
-  std::vector<PatchMatchEntry> entries;
-  if (std::filesystem::exists(config_path)) {
-    entries = ReadPatchMatchConfig(config_path);
-    plan->problems_source = config_path.string();
-  } else {
-    entries = AutoPatchMatchConfig(plan->model, static_cast<std::size_t>(options.max_num_src_images));
-    plan->problems_source = "no patch-match.cfg: __auto__, " +
-                            std::to_string(options.max_num_src_images) + " for every image";
-  }
-  for (PatchMatchEntry& entry : entries) {
-    if (entry.sources.kind == SourceSpec::Kind::kAuto) {
-      entry.sources.max_num_sources = std::min(
-          entry.sources.max_num_sources, static_cast<std::size_t>(options.max_num_src_images));
-    }
-  }
-  plan->problems = ResolvePatchMatchConfig(entries, plan->model, options.ViewSelection(),
-                                           config_path.string());
-}
-
-// Every image the plan touches must be on disk; better to learn that now
-// than after hours of inference.
-void CheckImagesExist(const Workspace& workspace, const DensePlan& plan) {
-  std::vector<image_t> needed;
-  for (const StereoProblem& problem : plan.problems) {
-    if (problem.source_image_ids.empty()) continue;  // skipped, see PrintPlan
-    needed.push_back(problem.reference_image_id);
-    needed.insert(needed.end(), problem.source_image_ids.begin(), problem.source_image_ids.end());
-  }
-  for (image_t image_id : needed) {
-    const std::filesystem::path path = workspace.ImagePath(plan.model.images.at(image_id).name);
-    if (!std::filesystem::is_regular_file(path)) {
-      throw IoError(path.string(), "image file of the sparse model is missing");
-    }
-  }
-}
-
-DensePlan PlanDenseReconstruction(const Workspace& workspace, const Options& options) {
-  DensePlan plan;
-  plan.model = workspace.ReadModel();
-  CheckPinholeCameras(plan.model, workspace);
-  PlanProblems(workspace, options, &plan);
-  CheckImagesExist(workspace, plan);
-  plan.depth_ranges = ComputeDepthRanges(plan.model, options.DepthRange());
-  plan.fallback_depth_range = FallbackDepthRange(plan.depth_ranges);
-  return plan;
-}
-
-std::string FormatDepth(double depth) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.6g", depth);
-  return buffer;
-}
-
-void PrintPlan(const DensePlan& plan, std::ostream& out) {
-  out << "# " << plan.model.images.size() << " images, " << plan.model.points3D.size()
-      << " sparse points; " << plan.problems.size() << " stereo problems from "
-      << plan.problems_source << '\n';
-  for (const StereoProblem& problem : plan.problems) {
-    const Image& reference = plan.model.images.at(problem.reference_image_id);
-    const DepthRange& own_range = plan.depth_ranges.at(problem.reference_image_id);
-    const bool use_fallback = !own_range.valid;
-    const DepthRange& range = use_fallback ? plan.fallback_depth_range : own_range;
-
-    out << reference.name << '\t';
-    if (range.valid) {
-      out << "d_min=" << FormatDepth(range.d_min) << "\td_max=" << FormatDepth(range.d_max);
-    } else {
-      out << "d_min=none\td_max=none";
-    }
-    // The count is the image's own: how much sparse support its range has.
-    out << "\tpoints=" << own_range.num_points;
-    if (use_fallback) out << "\tfallback";
-    out << "\tsources=";
-    for (std::size_t i = 0; i < problem.source_image_ids.size(); ++i) {
-      out << (i == 0 ? "" : ",") << plan.model.images.at(problem.source_image_ids[i]).name;
-    }
-    if (problem.source_image_ids.empty()) out << "(none: skipped, as COLMAP does)";
-    out << '\n';
-  }
+void PrintPassSummary(const char* pass, const dense::PassSummary& summary, std::ostream& out) {
+  out << "summary: " << pass << ": " << summary.done << " done, " << summary.skipped_existing
+      << " skipped (existing), " << summary.skipped_no_sources << " skipped (no sources or input), "
+      << summary.failures.size() << " failed";
+  char seconds[32];
+  std::snprintf(seconds, sizeof seconds, ", %.1f s\n", summary.seconds);
+  out << seconds;
+  for (const std::string& failure : summary.failures) out << "  failed: " << failure << '\n';
 }
 
 int Run(const Options& options) {
-  const Workspace workspace(options.workspace_path);
-  const DensePlan plan = PlanDenseReconstruction(workspace, options);
-  PrintPlan(plan, std::cout);
-  // Later: RunPhotometricPass(workspace, plan, options) writes
-  // dispmvs.photometric depth/confidence maps, RunGeometricPass filters them
-  // into dispmvs.geometric, RunFusion writes fused.ply.
-  return 0;
+  const auto start = std::chrono::steady_clock::now();
+  if (options.mode == "full" || options.mode == "photometric") {
+    dense::DepthEstimator::CheckWeightsFile(options.photometric.estimator.model_path);
+  }
+  const colmap_io::Workspace workspace(options.workspace_path);
+  dense::DensePlan plan = dense::PlanDenseReconstruction(workspace, options.plan);
+  if (!options.image_list_path.empty()) {
+    dense::RestrictToImages(ReadImageList(options.image_list_path), &plan);
+  }
+  if (!options.shard.empty()) {
+    const auto [index, count] = ParseShard(options.shard);
+    dense::RestrictToShard(index, count, &plan);
+  }
+  if (options.mode == "plan") {
+    dense::PrintPlan(plan, std::cout);
+    return 0;
+  }
+  if (options.mode == "export") {
+    dense::ExportForColmap(workspace, plan, options.export_path, std::cout);
+    return 0;
+  }
+  std::cout << "plan: " << plan.problems.size() << " reference image(s) from "
+            << plan.problems_source << '\n';
+  for (auto image_id : plan.missing_images) {
+    std::cout << "warning: image file missing, not used: " << plan.ImageOf(image_id).name << '\n';
+  }
+  bool failed = !plan.missing_images.empty() && options.mode != "fuse";
+  std::vector<std::pair<const char*, dense::PassSummary>> summaries;
+  if (options.mode == "full" || options.mode == "photometric") {
+    summaries.emplace_back("photometric",
+                           dense::RunPhotometricPass(workspace, plan, options.photometric, std::cout));
+  }
+  std::optional<dense::FusionSummary> fusion_summary;
+  if (options.mode == "full" || options.mode == "fuse") {
+    summaries.emplace_back("geometric",
+                           dense::RunGeometricPass(workspace, plan, options.filter, std::cout));
+    const fs::path ply = options.output_path.empty() ? workspace.root() / "fused.ply"
+                                                     : fs::path(options.output_path);
+    fusion_summary = dense::RunFusion(workspace, plan, options.filter, ply, std::cout);
+  }
+  for (const auto& [pass, summary] : summaries) {
+    PrintPassSummary(pass, summary, std::cout);
+    failed = failed || !summary.failures.empty();
+  }
+  if (fusion_summary) {
+    std::cout << "summary: fusion: " << fusion_summary->num_points << " points from "
+              << fusion_summary->num_images << " image(s)\n";
+  }
+  const double seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  char total[64];
+  std::snprintf(total, sizeof total, "summary: total %.1f s%s\n", seconds,
+                failed ? " (with failures: exit status 1)" : "");
+  std::cout << total;
+  return failed ? 1 : 0;
 }
 
 }  // namespace

@@ -1,0 +1,196 @@
+#include "fusion/point_fusion.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "fusion/input_checks.h"
+
+namespace dispmvs::fusion {
+namespace {
+
+void ValidateView(const std::vector<FusionView>& views, std::size_t index) {
+  const FusionView& view = views[index];
+  const std::string what = "FusePoints: view " + std::to_string(index);
+  ValidateDepthView(view.geometry, what);
+  if (!view.normals.empty()) {
+    internal::CheckMap(view.normals, 3, what + " normals");
+    internal::CheckSameSize(view.normals, view.geometry.depth, what + " normals");
+  }
+  if (!view.image.empty()) {
+    if (view.image.type() != CV_8UC3 && view.image.type() != CV_32FC3) {
+      throw std::invalid_argument(what + ": image must be CV_8UC3 or CV_32FC3 RGB");
+    }
+    if (view.image.cols != view.geometry.depth.width() ||
+        view.image.rows != view.geometry.depth.height()) {
+      throw std::invalid_argument(what + ": image is " + std::to_string(view.image.cols) + "x" +
+                                  std::to_string(view.image.rows) + ", the depth map " +
+                                  std::to_string(view.geometry.depth.width()) + "x" +
+                                  std::to_string(view.geometry.depth.height()));
+    }
+  }
+  if (view.source_views.size() > static_cast<std::size_t>(kMaxSourceViews)) {
+    throw std::invalid_argument(what + ": " + std::to_string(view.source_views.size()) +
+                                " source views, at most " + std::to_string(kMaxSourceViews));
+  }
+  for (std::size_t i = 0; i < view.source_views.size(); ++i) {
+    const int source = view.source_views[i];
+    if (source < 0 || static_cast<std::size_t>(source) >= views.size()) {
+      throw std::invalid_argument(what + ": source view index " + std::to_string(source) +
+                                  " out of range");
+    }
+    if (static_cast<std::size_t>(source) == index) {
+      throw std::invalid_argument(what + ": lists itself as a source view");
+    }
+    if (std::find(view.source_views.begin(), view.source_views.begin() + i, source) !=
+        view.source_views.begin() + i) {
+      throw std::invalid_argument(what + ": source view " + std::to_string(source) +
+                                  " listed twice");
+    }
+  }
+}
+
+// Per-view constants for turning pixels into world points and normals.
+struct ViewFrame {
+  Eigen::Matrix3d K_inv;
+  Eigen::Matrix3d R_transpose;  // camera-to-world rotation
+  Eigen::Vector3d centre;       // camera centre in the world, -R^T t
+
+  explicit ViewFrame(const DepthView& view)
+      : K_inv(view.K.inverse()), R_transpose(view.R.transpose()),
+        centre(-view.R.transpose() * view.t) {}
+
+  Eigen::Vector3d WorldPoint(int row, int col, double depth) const {
+    return R_transpose * (depth * (K_inv * Eigen::Vector3d(col, row, 1.0))) + centre;
+  }
+};
+
+// Sums of the per-pixel contributions to one point.
+struct Accumulator {
+  Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
+  int num_points = 0;
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  Eigen::Vector3d rgb = Eigen::Vector3d::Zero();  // in [0, 1]
+  int num_colours = 0;
+  std::array<uint32_t, kMaxSourceViews + 1> visibility{};
+  int num_visibility = 0;
+
+  void Add(const FusionView& view, const ViewFrame& frame, int row, int col, double depth) {
+    xyz += frame.WorldPoint(row, col, depth);
+    ++num_points;
+    visibility[num_visibility++] = view.vis_index;
+    const int width = view.geometry.depth.width();
+    const std::size_t index = static_cast<std::size_t>(row) * width + col;
+    if (!view.normals.empty()) {
+      const std::size_t plane = static_cast<std::size_t>(width) * view.geometry.depth.height();
+      const float* n = view.normals.data();
+      const Eigen::Vector3d camera_normal(n[index], n[plane + index], n[2 * plane + index]);
+      const double norm = camera_normal.norm();
+      // Zero (unknown) and non-finite normals are skipped.
+      if (norm > 1e-6 && std::isfinite(norm)) {
+        normal += frame.R_transpose * (camera_normal / norm);
+      }
+    }
+    if (!view.image.empty()) {
+      if (view.image.type() == CV_8UC3) {
+        const cv::Vec3b& c = view.image.at<cv::Vec3b>(row, col);
+        rgb += Eigen::Vector3d(c[0], c[1], c[2]) / 255.0;
+      } else {
+        const cv::Vec3f& c = view.image.at<cv::Vec3f>(row, col);
+        rgb += Eigen::Vector3d(c[0], c[1], c[2]);
+      }
+      ++num_colours;
+    }
+  }
+
+  FusedPoint Finish() {
+    FusedPoint point;
+    point.xyz = (xyz / num_points).cast<float>();
+    const double normal_norm = normal.norm();
+    // Opposite normals can cancel; such a point has no reliable normal.
+    if (normal_norm > 1e-6) point.normal = (normal / normal_norm).cast<float>();
+    if (num_colours > 0) {
+      for (int c = 0; c < 3; ++c) {
+        const double value = std::clamp(rgb[c] / num_colours, 0.0, 1.0);
+        point.rgb[c] = static_cast<uint8_t>(std::lround(value * 255.0));
+      }
+    }
+    std::sort(visibility.begin(), visibility.begin() + num_visibility);
+    const auto end = std::unique(visibility.begin(), visibility.begin() + num_visibility);
+    point.visibility.assign(visibility.begin(), end);
+    return point;
+  }
+};
+
+}  // namespace
+
+std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
+                                   const GeometricFilterOptions& options, FusionStats* stats) {
+  options.Check();
+  for (std::size_t v = 0; v < views.size(); ++v) ValidateView(views, v);
+  std::vector<ViewFrame> frames;
+  frames.reserve(views.size());
+  for (const FusionView& view : views) frames.emplace_back(view.geometry);
+  // One byte per pixel: small next to the depth, normal and colour the views
+  // already hold per pixel.
+  std::vector<std::vector<uint8_t>> consumed(views.size());
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    consumed[v].assign(views[v].geometry.depth.size(), 0u);
+  }
+  if (stats != nullptr) {
+    stats->points_per_view.assign(views.size(), 0);
+    stats->consumed_pixels_per_view.assign(views.size(), 0);
+  }
+
+  std::vector<FusedPoint> points;
+  std::vector<PairConsistency> pairs;
+  std::array<PairConsistency::Match, kMaxSourceViews> matches;
+  std::array<bool, kMaxSourceViews> agrees{};
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    const FusionView& reference = views[v];
+    pairs.clear();
+    for (int source : reference.source_views) {
+      pairs.emplace_back(reference.geometry, views[source].geometry, options);
+    }
+    const int width = reference.geometry.depth.width();
+    const int height = reference.geometry.depth.height();
+    const float* depth = reference.geometry.depth.data();
+    for (int row = 0; row < height; ++row) {
+      for (int col = 0; col < width; ++col) {
+        const std::size_t index = static_cast<std::size_t>(row) * width + col;
+        if (!HasUsableDepth(reference.geometry, row, col, options.min_confidence)) continue;
+        if (consumed[v][index]) {
+          if (stats != nullptr) ++stats->consumed_pixels_per_view[v];
+          continue;
+        }
+        int count = 0;
+        for (std::size_t s = 0; s < pairs.size(); ++s) {
+          agrees[s] = pairs[s].Check(row, col, depth[index], &matches[s]);
+          count += agrees[s] ? 1 : 0;
+        }
+        if (count < options.min_consistent_views) continue;
+
+        Accumulator sum;
+        sum.Add(reference, frames[v], row, col, depth[index]);
+        consumed[v][index] = 1;
+        for (std::size_t s = 0; s < pairs.size(); ++s) {
+          if (!agrees[s]) continue;
+          const int source = reference.source_views[s];
+          const PairConsistency::Match& match = matches[s];
+          sum.Add(views[source], frames[source], match.row, match.col, match.depth);
+          consumed[source][static_cast<std::size_t>(match.row) *
+                               views[source].geometry.depth.width() +
+                           match.col] = 1;
+        }
+        points.push_back(sum.Finish());
+        if (stats != nullptr) ++stats->points_per_view[v];
+      }
+    }
+  }
+  return points;
+}
+
+}  // namespace dispmvs::fusion

@@ -1,0 +1,68 @@
+#pragma once
+// Fusion of filtered depth maps into one point cloud (the step COLMAP's
+// stereo_fusion does): every reference pixel that enough of its source views
+// agree with becomes one point, the mean of its own 3-D point and the agreeing
+// source points; the source pixels used are consumed so that the same surface
+// patch is not emitted again when that source is the reference.
+//
+// Pixel and pose conventions are those of geometric_filter.h.
+
+#include <cstddef>
+#include <cstdint>
+#include <opencv2/core.hpp>
+#include <vector>
+
+#include "colmap_io/dense_array.h"
+#include "fusion/fused_point.h"
+#include "fusion/geometric_filter.h"
+
+namespace dispmvs::fusion {
+
+struct FusionView {
+  DepthView geometry;
+  // 3 channels, unit normals in the CAMERA frame (0 = unknown), same size as
+  // the depth map; or empty (no normals: points get the mean of the normals
+  // the other views have, or 0).
+  colmap_io::DenseArray normals;
+  // CV_32FC3 RGB in [0, 1] or CV_8UC3 RGB, at the depth map's size; or empty
+  // (no colour: points get the mean colour of the other views, or black).
+  cv::Mat image;
+  // The image index written into fused.ply.vis for this view.
+  uint32_t vis_index = 0;
+  // Indices into the same vector of FusionView, at most kMaxSourceViews,
+  // without duplicates and without the view itself.
+  std::vector<int> source_views;
+};
+
+// What FusePoints did, per view (same order as the views).
+struct FusionStats {
+  // Points emitted with the view as the reference.
+  std::vector<std::size_t> points_per_view;
+  // Pixels with a usable depth skipped because an earlier reference consumed
+  // them.
+  std::vector<std::size_t> consumed_pixels_per_view;
+};
+
+// Visits the views in order and, within a view, the pixels row by row. A
+// reference pixel with a usable depth (geometric_filter.h) that no earlier
+// reference consumed, and that at least options.min_consistent_views of its
+// source views agree with (the test of FilterDepthMap), becomes one point:
+//   xyz        mean of the reference point and the agreeing source points,
+//              each source point being the source's own depth at the rounded
+//              projection, back-projected;
+//   normal     normalised mean of the world-frame normals (R^T n) of those
+//              pixels that have one; 0 if none has;
+//   rgb        mean colour of those pixels whose view has an image;
+//   visibility sorted unique vis_index of the reference and agreeing sources.
+// The agreeing source pixels are marked consumed. Consumed pixels still serve
+// as sources (agreement and averaging); they are only never references.
+//
+// Throws std::invalid_argument for invalid options or views (bad geometry,
+// maps of the wrong size or channel count, an image of another type or size,
+// source indices out of range, repeated, pointing at the view itself or more
+// than kMaxSourceViews).
+std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
+                                   const GeometricFilterOptions& options,
+                                   FusionStats* stats = nullptr);
+
+}  // namespace dispmvs::fusion

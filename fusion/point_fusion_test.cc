@@ -1,0 +1,296 @@
+#include "fusion/point_fusion.h"
+
+#include <gtest/gtest.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <vector>
+
+#include "fusion/test_scene.h"
+
+namespace dispmvs::fusion {
+namespace {
+
+using testing::Camera;
+using testing::DefaultCameras;
+using testing::MakeDepthView;
+using testing::Scene;
+using testing::Visibility;
+
+// The two-plane scene in 4 views, every view a source of every other, with
+// exact depth and normal maps and images of both supported types. The
+// vis_index values are deliberately not the view order.
+struct SceneViews {
+  Scene scene = Scene::TwoPlanes();
+  std::vector<Camera> cameras = DefaultCameras(4);
+  std::vector<FusionView> views;
+  const std::vector<uint32_t> vis_indices = {7, 2, 11, 5};
+
+  SceneViews() {
+    for (std::size_t i = 0; i < cameras.size(); ++i) {
+      FusionView view;
+      view.geometry = MakeDepthView(cameras[i], scene.RenderDepth(cameras[i]));
+      view.normals = scene.RenderNormals(cameras[i]);
+      view.image = scene.RenderImage(cameras[i], i % 2 == 0 ? CV_8UC3 : CV_32FC3);
+      view.vis_index = vis_indices[i];
+      for (std::size_t j = 0; j < cameras.size(); ++j) {
+        if (j != i) view.source_views.push_back(static_cast<int>(j));
+      }
+      views.push_back(std::move(view));
+    }
+  }
+
+  GeometricFilterResult Filter(std::size_t v, const GeometricFilterOptions& options) const {
+    std::vector<const DepthView*> sources;
+    for (int s : views[v].source_views) sources.push_back(&views[s].geometry);
+    return FilterDepthMap(views[v].geometry, sources, options);
+  }
+};
+
+// The plane a point lies on, by distance relative to its distance from the
+// first camera; -1 if none is within `tolerance`.
+int PlaneOf(const Scene& scene, const Eigen::Vector3d& x, double tolerance) {
+  for (std::size_t i = 0; i < scene.planes().size(); ++i) {
+    const testing::Plane& plane = scene.planes()[i];
+    const double slack = tolerance * x.norm();
+    if (std::abs(plane.SignedDistance(x)) <= slack && x.x() >= plane.x_min - slack &&
+        x.x() <= plane.x_max + slack && x.y() >= plane.y_min - slack && x.y() <= plane.y_max + slack) {
+      return static_cast<int>(i);
+    }
+  }
+  return -1;
+}
+
+TEST(PointFusionTest, PointsLieOnTheSurfaceWithItsNormalAndColour) {
+  const SceneViews s;
+  const std::vector<FusedPoint> points = FusePoints(s.views, GeometricFilterOptions());
+  ASSERT_GT(points.size(), 3000u);
+  for (const FusedPoint& point : points) {
+    const Eigen::Vector3d x = point.xyz.cast<double>();
+    const int plane = PlaneOf(s.scene, x, 1e-4);
+    ASSERT_GE(plane, 0) << "point off the surface: " << x.transpose();
+    const testing::Plane& truth = s.scene.planes()[plane];
+    // All cameras are on the same side, so every view orients the normal the same way.
+    EXPECT_LT((point.normal.cast<double>() - truth.normal).norm(), 1e-5) << x.transpose();
+    EXPECT_EQ(point.rgb, truth.rgb) << x.transpose();
+  }
+}
+
+TEST(PointFusionTest, VisibilityListsTheViewsThatSeeThePoint) {
+  const SceneViews s;
+  const std::vector<FusedPoint> points = FusePoints(s.views, GeometricFilterOptions());
+  int num_checked = 0;
+  for (const FusedPoint& point : points) {
+    ASSERT_TRUE(std::is_sorted(point.visibility.begin(), point.visibility.end()));
+    ASSERT_EQ(std::adjacent_find(point.visibility.begin(), point.visibility.end()),
+              point.visibility.end());
+    // The reference and at least min_consistent_views = 2 sources.
+    EXPECT_GE(point.visibility.size(), 3u);
+    const Eigen::Vector3d x = point.xyz.cast<double>();
+    const int plane = PlaneOf(s.scene, x, 1e-4);
+    ASSERT_GE(plane, 0);
+    for (std::size_t v = 0; v < s.cameras.size(); ++v) {
+      const bool listed = std::binary_search(point.visibility.begin(), point.visibility.end(),
+                                             s.vis_indices[v]);
+      switch (s.scene.Classify(s.cameras[v], x, plane)) {
+        case Visibility::kVisible:
+          EXPECT_TRUE(listed) << "view " << v << " sees " << x.transpose();
+          ++num_checked;
+          break;
+        case Visibility::kHidden:
+          EXPECT_FALSE(listed) << "view " << v << " does not see " << x.transpose();
+          ++num_checked;
+          break;
+        case Visibility::kUndecided:
+          break;
+      }
+    }
+  }
+  EXPECT_GT(num_checked, static_cast<int>(3 * points.size()));
+}
+
+TEST(PointFusionTest, ConsumedPixelsAreNotEmittedAgain) {
+  const SceneViews s;
+  const GeometricFilterOptions options;
+  FusionStats stats;
+  const std::vector<FusedPoint> points = FusePoints(s.views, options, &stats);
+  ASSERT_EQ(stats.points_per_view.size(), 4u);
+  std::size_t total = 0;
+  for (std::size_t n : stats.points_per_view) total += n;
+  EXPECT_EQ(total, points.size());
+  // The first reference consumes nothing earlier: one point per pixel that
+  // passes the filter.
+  EXPECT_EQ(stats.points_per_view[0], s.Filter(0, options).num_kept);
+  // The later ones see surface the first reference already fused: they only
+  // add the few pixels that no rounded projection hit, and the parts of the
+  // surface the first view does not see.
+  std::size_t later_kept = 0, later_points = 0, later_consumed = 0;
+  for (std::size_t v = 1; v < 4; ++v) {
+    later_kept += s.Filter(v, options).num_kept;
+    later_points += stats.points_per_view[v];
+    later_consumed += stats.consumed_pixels_per_view[v];
+  }
+  EXPECT_LT(later_points, later_kept / 10) << "consumed pixels emitted again?";
+  EXPECT_GT(later_consumed, later_kept / 2);
+}
+
+// Views with identical geometry: every pixel maps onto itself, so the first
+// view consumes the others entirely and each point is exactly one pixel.
+std::vector<FusionView> IdenticalViews(int count) {
+  const Scene scene = Scene::TwoPlanes();
+  const Camera camera = DefaultCameras(1)[0];
+  std::vector<FusionView> views(count);
+  const std::vector<uint32_t> vis_indices = {9, 2, 5, 4};
+  for (int i = 0; i < count; ++i) {
+    views[i].geometry = MakeDepthView(camera, scene.RenderDepth(camera));
+    views[i].vis_index = vis_indices[i];
+    for (int j = 0; j < count; ++j) {
+      if (j != i) views[i].source_views.push_back(j);
+    }
+  }
+  return views;
+}
+
+TEST(PointFusionTest, IdenticalViewsGiveOnePointPerPixel) {
+  const std::vector<FusionView> views = IdenticalViews(3);
+  FusionStats stats;
+  const std::vector<FusedPoint> points = FusePoints(views, GeometricFilterOptions(), &stats);
+  const std::size_t num_pixels = views[0].geometry.depth.size();
+  ASSERT_EQ(points.size(), num_pixels);
+  EXPECT_EQ(stats.points_per_view, (std::vector<std::size_t>{num_pixels, 0, 0}));
+  EXPECT_EQ(stats.consumed_pixels_per_view, (std::vector<std::size_t>{0, num_pixels, num_pixels}));
+  const testing::Camera camera = DefaultCameras(1)[0];
+  const Eigen::Matrix3d K_inv = camera.K.inverse();
+  const int width = views[0].geometry.depth.width();
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    // Row-major order, each point exactly its pixel's back-projection.
+    const int row = static_cast<int>(i) / width, col = static_cast<int>(i) % width;
+    const Eigen::Vector3d x = camera.R.transpose() *
+        (views[0].geometry.depth.at(row, col) * (K_inv * Eigen::Vector3d(col, row, 1)) - camera.t);
+    EXPECT_LT((points[i].xyz.cast<double>() - x).norm(), 1e-5 * x.norm());
+    EXPECT_EQ(points[i].visibility, (std::vector<uint32_t>{2, 5, 9}));
+    // No normal maps, no images.
+    EXPECT_EQ(points[i].normal, Eigen::Vector3f::Zero());
+    EXPECT_EQ(points[i].rgb, (std::array<uint8_t, 3>{0, 0, 0}));
+  }
+}
+
+// A fronto-parallel plane seen by two cameras 1 apart along x: the disparity
+// fx * 1 / depth is exactly 4 pixels, so reference pixel col maps onto source
+// pixel col - 4 and back without rounding.
+struct IntegerDisparityPair {
+  static constexpr int kWidth = 24, kHeight = 10;
+  std::vector<FusionView> views = std::vector<FusionView>(2);
+
+  IntegerDisparityPair() {
+    Eigen::Matrix3d K;
+    K << 40.0, 0, 11.5, 0, 40.0, 4.5, 0, 0, 1;
+    for (int i = 0; i < 2; ++i) {
+      views[i].geometry.K = K;
+      views[i].geometry.depth = colmap_io::DenseArray(kWidth, kHeight, 1, 10.0f);
+      views[i].vis_index = static_cast<uint32_t>(3 + i);
+      views[i].source_views = {1 - i};
+    }
+    views[1].geometry.t = Eigen::Vector3d(-1.0, 0, 0);
+  }
+};
+
+TEST(PointFusionTest, IntegerDisparityConsumesExactlyTheMatchedPixels) {
+  IntegerDisparityPair pair;
+  pair.views[0].normals = colmap_io::DenseArray(IntegerDisparityPair::kWidth, IntegerDisparityPair::kHeight, 3, 0.0f);
+  pair.views[1].normals = pair.views[0].normals;
+  for (int row = 0; row < IntegerDisparityPair::kHeight; ++row) {
+    for (int col = 0; col < IntegerDisparityPair::kWidth; ++col) {
+      pair.views[0].normals.at(row, col, 2) = -1.0f;
+      pair.views[1].normals.at(row, col, 0) = 0.6f;
+      pair.views[1].normals.at(row, col, 2) = -0.8f;
+    }
+  }
+  pair.views[0].image = cv::Mat(IntegerDisparityPair::kHeight, IntegerDisparityPair::kWidth, CV_8UC3,
+                                cv::Scalar(100, 0, 50));
+  pair.views[1].image = cv::Mat(IntegerDisparityPair::kHeight, IntegerDisparityPair::kWidth, CV_32FC3,
+                                cv::Scalar(200 / 255.0, 254 / 255.0, 52 / 255.0));
+  GeometricFilterOptions options;
+  options.min_consistent_views = 1;
+  FusionStats stats;
+  const std::vector<FusedPoint> points = FusePoints(pair.views, options, &stats);
+  // Columns 0..3 of view 0 and 20..23 of view 1 have no partner.
+  const std::size_t matched = (IntegerDisparityPair::kWidth - 4) * IntegerDisparityPair::kHeight;
+  ASSERT_EQ(points.size(), matched);
+  EXPECT_EQ(stats.points_per_view, (std::vector<std::size_t>{matched, 0}));
+  EXPECT_EQ(stats.consumed_pixels_per_view, (std::vector<std::size_t>{0, matched}));
+  const Eigen::Vector3f expected_normal = Eigen::Vector3f(0.6f, 0.0f, -1.8f).normalized();
+  for (const FusedPoint& point : points) {
+    EXPECT_NEAR(point.xyz.z(), 10.0f, 1e-5f);
+    EXPECT_EQ(point.visibility, (std::vector<uint32_t>{3, 4}));
+    EXPECT_LT((point.normal - expected_normal).norm(), 1e-6f);
+    EXPECT_EQ(point.rgb, (std::array<uint8_t, 3>{150, 127, 51}));
+  }
+  // Reference pixel (row 0, col 4) is at world x = 10 * (4 - 11.5) / 40.
+  EXPECT_NEAR(points[0].xyz.x(), 10.0f * (4 - 11.5f) / 40.0f, 1e-5f);
+}
+
+TEST(PointFusionTest, MissingNormalsAndColoursComeFromTheOtherViews) {
+  IntegerDisparityPair pair;
+  pair.views[1].normals = colmap_io::DenseArray(IntegerDisparityPair::kWidth, IntegerDisparityPair::kHeight, 3, 0.0f);
+  for (int row = 0; row < IntegerDisparityPair::kHeight; ++row) {
+    for (int col = 0; col < IntegerDisparityPair::kWidth; ++col) pair.views[1].normals.at(row, col, 2) = -1.0f;
+  }
+  pair.views[1].image = cv::Mat(IntegerDisparityPair::kHeight, IntegerDisparityPair::kWidth, CV_8UC3,
+                                cv::Scalar(10, 20, 30));
+  GeometricFilterOptions options;
+  options.min_consistent_views = 1;
+  const std::vector<FusedPoint> points = FusePoints(pair.views, options);
+  ASSERT_FALSE(points.empty());
+  for (const FusedPoint& point : points) {
+    EXPECT_EQ(point.normal, Eigen::Vector3f(0, 0, -1));
+    EXPECT_EQ(point.rgb, (std::array<uint8_t, 3>{10, 20, 30}));
+  }
+}
+
+TEST(PointFusionTest, TooFewAgreeingSourcesGiveNoPoints) {
+  const std::vector<FusionView> views = IdenticalViews(2);
+  GeometricFilterOptions options;  // 2 needed, each view has 1 source
+  EXPECT_TRUE(FusePoints(views, options).empty());
+  EXPECT_TRUE(FusePoints({}, options).empty());
+}
+
+TEST(PointFusionTest, RejectsBadViews) {
+  const GeometricFilterOptions options;
+  std::vector<FusionView> views = IdenticalViews(3);
+  views[0].source_views = {0, 1};
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[0].source_views = {1, 3};
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[0].source_views = {1, -1};
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[0].source_views = {1, 2, 1};
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[0].source_views = std::vector<int>(kMaxSourceViews + 1, 1);
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+
+  views = IdenticalViews(3);
+  const int width = views[1].geometry.depth.width(), height = views[1].geometry.depth.height();
+  views[1].normals = colmap_io::DenseArray(width, height, 1, 0.0f);
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[1].normals = colmap_io::DenseArray(width + 1, height, 3, 0.0f);
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[1].normals = colmap_io::DenseArray();
+  views[1].image = cv::Mat(height, width, CV_8UC1, cv::Scalar(0));
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[1].image = cv::Mat(height, width - 1, CV_8UC3, cv::Scalar::all(0));
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[1].image = cv::Mat();
+  views[1].geometry.K(2, 2) = 0.5;
+  EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  views[1].geometry.K(2, 2) = 1.0;
+  GeometricFilterOptions bad_options;
+  bad_options.min_consistent_views = -1;
+  EXPECT_THROW(FusePoints(views, bad_options), std::invalid_argument);
+  EXPECT_NO_THROW(FusePoints(views, options));
+}
+
+}  // namespace
+}  // namespace dispmvs::fusion

@@ -1,0 +1,239 @@
+#include "src/dense_plan.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <set>
+#include <stdexcept>
+
+#include "colmap_io/error.h"
+
+namespace dispmvs::dense {
+
+using namespace colmap_io;
+
+namespace {
+
+void RequireFinite(double value, const char* option) {
+  if (!std::isfinite(value)) {
+    throw std::invalid_argument(std::string("--") + option + " must be a finite number");
+  }
+}
+
+// Dense MVS needs undistorted images: pinhole cameras only.
+void CheckPinholeCameras(const SparseModel& model, const Workspace& workspace) {
+  for (const auto& [image_id, image] : model.images) {
+    const auto camera = model.cameras.find(image.camera_id);
+    if (camera == model.cameras.end() || !camera->second.IsPinhole()) {
+      throw IoError(workspace.SparseDir().string(),
+                    "image \"" + image.name +
+                        "\" does not use a PINHOLE or SIMPLE_PINHOLE camera; dense "
+                        "reconstruction needs the output of `colmap image_undistorter`");
+    }
+  }
+}
+
+// The stereo problems: from patch-match.cfg, or `__auto__` for every image.
+// Applies --max_num_src_images to `__auto__` entries.
+void PlanProblems(const Workspace& workspace, const PlanOptions& options, DensePlan* plan) {
+  const std::filesystem::path config_path = workspace.PatchMatchConfigPath();
+  std::vector<PatchMatchEntry> entries;
+  const auto max_sources = static_cast<std::size_t>(options.max_num_src_images);
+  if (std::filesystem::exists(config_path)) {
+    entries = ReadPatchMatchConfig(config_path);
+    plan->problems_source = config_path.string();
+  } else {
+    entries = AutoPatchMatchConfig(plan->model, max_sources);
+    plan->problems_source =
+        "no patch-match.cfg: __auto__, " + std::to_string(max_sources) + " for every image";
+  }
+  for (PatchMatchEntry& entry : entries) {
+    if (entry.sources.kind == SourceSpec::Kind::kAuto) {
+      entry.sources.max_num_sources = std::min(entry.sources.max_num_sources, max_sources);
+    }
+  }
+  plan->problems = ResolvePatchMatchConfig(entries, plan->model, options.ViewSelection(),
+                                           config_path.string());
+}
+
+// Images missing on disk are reported once and dropped from every source
+// list; better to learn that now than after hours of inference.
+void DropMissingImages(const Workspace& workspace, DensePlan* plan) {
+  std::set<image_t> missing;
+  for (const auto& [image_id, image] : plan->model.images) {
+    if (!std::filesystem::is_regular_file(workspace.ImagePath(image.name))) {
+      missing.insert(image_id);
+    }
+  }
+  plan->missing_images.assign(missing.begin(), missing.end());
+  for (StereoProblem& problem : plan->problems) {
+    auto& sources = problem.source_image_ids;
+    sources.erase(std::remove_if(sources.begin(), sources.end(),
+                                 [&](image_t id) { return missing.count(id) > 0; }),
+                  sources.end());
+  }
+}
+
+std::string FormatDepth(double depth) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof(buffer), "%.6g", depth);
+  return buffer;
+}
+
+}  // namespace
+
+void PlanOptions::Check() const {
+  if (max_num_src_images < 1) {
+    throw std::invalid_argument("--max_num_src_images must be at least 1, got " +
+                                std::to_string(max_num_src_images));
+  }
+  if (static_cast<std::size_t>(max_num_src_images) > kMaxAutoSources) {
+    throw std::invalid_argument("--max_num_src_images must be at most " +
+                                std::to_string(kMaxAutoSources));
+  }
+  RequireFinite(min_triangulation_angle, "min_triangulation_angle");
+  if (min_triangulation_angle < 0.0 || min_triangulation_angle > 90.0) {
+    throw std::invalid_argument("--min_triangulation_angle must be in [0, 90] degrees");
+  }
+  RequireFinite(depth_min_percentile, "depth_min_percentile");
+  RequireFinite(depth_max_percentile, "depth_max_percentile");
+  RequireFinite(depth_stretch_ratio, "depth_stretch_ratio");
+  if (depth_min_percentile < 0.0 || depth_min_percentile > 1.0 || depth_max_percentile < 0.0 ||
+      depth_max_percentile > 1.0) {
+    throw std::invalid_argument(
+        "--depth_min_percentile and --depth_max_percentile are fractions in [0, 1]");
+  }
+  if (depth_min_percentile > depth_max_percentile) {
+    throw std::invalid_argument("--depth_min_percentile must not exceed --depth_max_percentile");
+  }
+  if (depth_stretch_ratio < 0.0 || depth_stretch_ratio >= 1.0) {
+    throw std::invalid_argument("--depth_stretch_ratio must be in [0, 1)");
+  }
+  if (depth_min_num_points < 1) {
+    throw std::invalid_argument("--depth_min_num_points must be at least 1");
+  }
+  RequireFinite(depth_min, "depth_min");
+  RequireFinite(depth_max, "depth_max");
+  if ((depth_min > 0) != (depth_max > 0)) {
+    throw std::invalid_argument("--depth_min and --depth_max must be given together");
+  }
+  if (depth_min > 0 && depth_min >= depth_max) {
+    throw std::invalid_argument("--depth_min must be smaller than --depth_max");
+  }
+  // The library structs check themselves too; this catches any drift between
+  // the two sets of rules.
+  ViewSelection().Check();
+  DepthRange().Check();
+}
+
+ViewSelectionOptions PlanOptions::ViewSelection() const {
+  ViewSelectionOptions options;
+  options.min_triangulation_angle_deg = min_triangulation_angle;
+  return options;
+}
+
+DepthRangeOptions PlanOptions::DepthRange() const {
+  DepthRangeOptions options;
+  options.min_percentile = depth_min_percentile;
+  options.max_percentile = depth_max_percentile;
+  options.stretch_ratio = depth_stretch_ratio;
+  options.min_num_points = static_cast<std::size_t>(depth_min_num_points);
+  return options;
+}
+
+DepthRange DensePlan::HintFor(image_t image_id, bool* is_fallback) const {
+  if (is_fallback != nullptr) *is_fallback = false;
+  if (user_depth_range) return *user_depth_range;
+  const auto own = depth_ranges.find(image_id);
+  if (own != depth_ranges.end() && own->second.valid) return own->second;
+  if (is_fallback != nullptr) *is_fallback = true;
+  return fallback_depth_range;
+}
+
+DensePlan PlanDenseReconstruction(const Workspace& workspace, const PlanOptions& options) {
+  options.Check();
+  DensePlan plan;
+  plan.model = workspace.ReadModel();
+  if (plan.model.images.empty()) {
+    throw IoError(workspace.SparseDir().string(), "the sparse model has no registered images");
+  }
+  CheckPinholeCameras(plan.model, workspace);
+  PlanProblems(workspace, options, &plan);
+  DropMissingImages(workspace, &plan);
+  plan.depth_ranges = ComputeDepthRanges(plan.model, options.DepthRange());
+  plan.fallback_depth_range = FallbackDepthRange(plan.depth_ranges);
+  if (options.depth_min > 0) {
+    colmap_io::DepthRange user;
+    user.d_min = options.depth_min;
+    user.d_max = options.depth_max;
+    user.valid = true;
+    plan.user_depth_range = user;
+  }
+  return plan;
+}
+
+void RestrictToImages(const std::vector<std::string>& names, DensePlan* plan) {
+  std::set<std::string> wanted(names.begin(), names.end());
+  std::vector<StereoProblem> kept;
+  for (const StereoProblem& problem : plan->problems) {
+    if (wanted.erase(plan->ImageOf(problem.reference_image_id).name) > 0) {
+      kept.push_back(problem);
+    }
+  }
+  if (!wanted.empty()) {
+    throw std::invalid_argument("image \"" + *wanted.begin() +
+                                "\" of the image list is not a reference image of the plan");
+  }
+  plan->problems = std::move(kept);
+}
+
+void RestrictToShard(int index, int count, DensePlan* plan) {
+  if (count < 1 || index < 0 || index >= count) {
+    throw std::invalid_argument("shard index must be in [0, count)");
+  }
+  std::vector<StereoProblem> kept;
+  for (std::size_t i = 0; i < plan->problems.size(); ++i) {
+    if (static_cast<int>(i % static_cast<std::size_t>(count)) == index) {
+      kept.push_back(plan->problems[i]);
+    }
+  }
+  plan->problems = std::move(kept);
+}
+
+void PrintPlan(const DensePlan& plan, std::ostream& out) {
+  out << "# " << plan.model.images.size() << " images, " << plan.model.points3D.size()
+      << " sparse points; " << plan.problems.size() << " stereo problems from "
+      << plan.problems_source << '\n';
+  for (image_t missing : plan.missing_images) {
+    out << "# warning: image file missing, not used: " << plan.ImageOf(missing).name << '\n';
+  }
+  for (const StereoProblem& problem : plan.problems) {
+    const Image& reference = plan.ImageOf(problem.reference_image_id);
+    const auto own = plan.depth_ranges.find(problem.reference_image_id);
+    bool fallback = false;
+    const colmap_io::DepthRange range = plan.HintFor(problem.reference_image_id, &fallback);
+
+    out << reference.name << '\t';
+    if (range.valid) {
+      out << "d_min=" << FormatDepth(range.d_min) << "\td_max=" << FormatDepth(range.d_max);
+    } else {
+      out << "d_min=none\td_max=none";
+    }
+    // The count is the image's own: how much sparse support its range has.
+    out << "\tpoints=" << (own != plan.depth_ranges.end() ? own->second.num_points : 0);
+    if (plan.user_depth_range) {
+      out << "\tuser";
+    } else if (fallback) {
+      out << "\tfallback";
+    }
+    out << "\tsources=";
+    for (std::size_t i = 0; i < problem.source_image_ids.size(); ++i) {
+      out << (i == 0 ? "" : ",") << plan.ImageOf(problem.source_image_ids[i]).name;
+    }
+    if (problem.source_image_ids.empty()) out << "(none: skipped, as COLMAP does)";
+    out << '\n';
+  }
+}
+
+}  // namespace dispmvs::dense

@@ -1,0 +1,82 @@
+#pragma once
+// The plan of a dense reconstruction: the stereo problems (reference image,
+// source images) and the depth-range hint of every image, derived once from
+// the workspace and used by every pass of dispmvs_colmap.
+
+#include <cstddef>
+#include <map>
+#include <optional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+#include "colmap_io/depth_range.h"
+#include "colmap_io/sparse_model.h"
+#include "colmap_io/stereo_config.h"
+#include "colmap_io/view_selection.h"
+#include "colmap_io/workspace.h"
+
+namespace dispmvs::dense {
+
+struct PlanOptions {
+  // DispMVS was trained with N = 5 views, one reference and 4 sources (paper,
+  // Sec. 4). More sources cost memory and time linearly and the network never
+  // saw them; COLMAP's own `__auto__, 20` is tuned for PatchMatch.
+  int max_num_src_images = 4;
+  // COLMAP's PatchMatchStereo.min_triangulation_angle default, degrees.
+  double min_triangulation_angle = 1.0;
+  // Depth-range hint from the sparse points (colmap_io/depth_range.h; the
+  // defaults are COLMAP's).
+  double depth_min_percentile = 0.01;
+  double depth_max_percentile = 0.99;
+  double depth_stretch_ratio = 0.25;
+  int depth_min_num_points = 1;
+  // A user-given hint for every image instead (both or neither); <= 0 = unset.
+  double depth_min = -1;
+  double depth_max = -1;
+
+  // Throws std::invalid_argument naming the command-line option at fault.
+  void Check() const;
+  colmap_io::ViewSelectionOptions ViewSelection() const;
+  colmap_io::DepthRangeOptions DepthRange() const;
+};
+
+struct DensePlan {
+  colmap_io::SparseModel model;
+  // Where the problems came from: the patch-match.cfg path, or a note that
+  // they were generated.
+  std::string problems_source;
+  std::vector<colmap_io::StereoProblem> problems;
+  std::map<colmap_io::image_t, colmap_io::DepthRange> depth_ranges;  // every image
+  colmap_io::DepthRange fallback_depth_range;
+  std::optional<colmap_io::DepthRange> user_depth_range;  // --depth_min/--depth_max
+  // Images of the model whose file is missing from WS/images (they are left
+  // out of every source list; a reference among them fails alone).
+  std::vector<colmap_io::image_t> missing_images;
+
+  // The hint for `image_id`: the user's, else the image's own, else the
+  // fallback. `is_fallback` (optional) says whether the fallback was used.
+  colmap_io::DepthRange HintFor(colmap_io::image_t image_id, bool* is_fallback = nullptr) const;
+  const colmap_io::Image& ImageOf(colmap_io::image_t image_id) const {
+    return model.images.at(image_id);
+  }
+};
+
+// Reads the model, checks the cameras are undistorted (PINHOLE or
+// SIMPLE_PINHOLE: IoError otherwise), resolves the problems from
+// stereo/patch-match.cfg or `__auto__` for every image, computes the hints.
+// Throws IoError / std::invalid_argument on a workspace that cannot be used
+// at all (no registered images among them).
+DensePlan PlanDenseReconstruction(const colmap_io::Workspace& workspace,
+                                  const PlanOptions& options);
+
+// Keeps the problems whose reference is listed (by name) in `names`; throws
+// std::invalid_argument naming a listed image that has no problem.
+void RestrictToImages(const std::vector<std::string>& names, DensePlan* plan);
+// Keeps problem i when i % count == index (a shard of a batch job).
+void RestrictToShard(int index, int count, DensePlan* plan);
+
+// One tab-separated line per problem: NAME d_min= d_max= points= [fallback] sources=...
+void PrintPlan(const DensePlan& plan, std::ostream& out);
+
+}  // namespace dispmvs::dense

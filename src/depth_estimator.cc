@@ -1,0 +1,177 @@
+#include "src/depth_estimator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <thread>
+
+#include <ATen/CPUGeneratorImpl.h>
+#include <torch/torch.h>
+
+#include "model/dispmvs_net.h"
+#include "model/safetensors.h"
+
+namespace dispmvs::dense {
+
+namespace {
+
+torch::Device ParseDevice(const std::string& text) {
+  const std::string message = "--device must be cpu, cuda or cuda:<index>, got '" + text + "'";
+  std::unique_ptr<torch::Device> device;
+  try {
+    device = std::make_unique<torch::Device>(text);
+  } catch (const std::exception&) {
+    throw std::invalid_argument(message);
+  }
+  if (!device->is_cpu() && !device->is_cuda()) throw std::invalid_argument(message);
+  if (device->is_cuda()) {
+    if (!torch::cuda::is_available()) {
+      throw std::invalid_argument("--device " + text +
+                                  ": this LibTorch has no CUDA or no GPU is visible");
+    }
+    const int64_t count = static_cast<int64_t>(torch::cuda::device_count());
+    if (device->has_index() && device->index() >= count) {
+      throw std::invalid_argument("--device " + text + ": only " + std::to_string(count) +
+                                  " GPU(s) visible");
+    }
+  }
+  return *device;
+}
+
+// [3,H,W] float tensor of an RGB CV_32FC3 image.
+torch::Tensor ImageTensor(const cv::Mat& image) {
+  if (image.type() != CV_32FC3 || !image.isContinuous()) {
+    throw std::invalid_argument("DepthEstimator: images must be continuous CV_32FC3");
+  }
+  return torch::from_blob(const_cast<float*>(image.ptr<float>()), {image.rows, image.cols, 3},
+                          torch::kFloat32)
+      .permute({2, 0, 1})
+      .clone();
+}
+
+torch::Tensor MatrixTensor(const Eigen::Matrix3d& K) {
+  torch::Tensor t = torch::zeros({3, 3}, torch::kFloat64);
+  auto a = t.accessor<double, 2>();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) a[r][c] = K(r, c);
+  }
+  return t;
+}
+
+torch::Tensor PoseTensor(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  torch::Tensor m = torch::eye(4, torch::kFloat64);
+  auto a = m.accessor<double, 2>();
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) a[r][c] = R(r, c);
+    a[r][3] = t(r);
+  }
+  return m;
+}
+
+// [H,W] CPU float tensor -> dense array, non-finite or negative -> 0.
+colmap_io::DenseArray ToDenseArray(const torch::Tensor& map) {
+  const torch::Tensor cpu = map.to(torch::kCPU, torch::kFloat32).contiguous();
+  const int height = static_cast<int>(cpu.size(0));
+  const int width = static_cast<int>(cpu.size(1));
+  colmap_io::DenseArray array(width, height, 1);
+  const float* src = cpu.data_ptr<float>();
+  float* dst = array.data();
+  for (std::size_t i = 0; i < array.size(); ++i) {
+    dst[i] = std::isfinite(src[i]) && src[i] > 0.0f ? src[i] : 0.0f;
+  }
+  return array;
+}
+
+}  // namespace
+
+void EstimatorOptions::Check() const {
+  if (model_path.empty()) throw std::invalid_argument("--model_path must not be empty");
+  ParseDevice(device);
+  if (threads < 0) throw std::invalid_argument("--threads must be >= 0 (0 = one per core)");
+  if (coarse_iterations < 0 || fine_iterations < 0) {
+    throw std::invalid_argument("--coarse_iterations and --fine_iterations must be >= 0");
+  }
+}
+
+struct DepthEstimator::Impl {
+  torch::Device device{torch::kCPU};
+  model::ModelConfig config;
+  model::DispMvsNet net{nullptr};
+};
+
+DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::make_unique<Impl>()) {
+  options.Check();
+  impl_->device = ParseDevice(options.device);
+  const int threads = options.threads > 0
+                          ? options.threads
+                          : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+  torch::set_num_threads(threads);
+  try {
+    impl_->config = model::ReadModelConfig(options.model_path);
+    // Iteration counts are not part of the weights' shapes: the same weights
+    // run with more or fewer updates.
+    if (options.coarse_iterations > 0) impl_->config.coarse_iterations = options.coarse_iterations;
+    if (options.fine_iterations > 0) impl_->config.fine_iterations = options.fine_iterations;
+    impl_->net = model::DispMvsNet(impl_->config);
+    model::LoadModuleWeights(*impl_->net, options.model_path);
+  } catch (const std::exception& error) {
+    throw std::runtime_error("cannot use the weights " + options.model_path + ": " + error.what());
+  }
+  impl_->net->to(impl_->device);
+  impl_->net->eval();
+}
+
+DepthEstimator::~DepthEstimator() = default;
+
+void DepthEstimator::CheckWeightsFile(const std::string& model_path) {
+  try {
+    model::ReadModelConfig(model_path);
+  } catch (const std::exception& error) {
+    throw std::runtime_error("cannot use the weights " + model_path + ": " + error.what());
+  }
+}
+
+std::string DepthEstimator::Describe() const {
+  int64_t parameters = 0;
+  for (const auto& p : impl_->net->parameters()) parameters += p.numel();
+  return impl_->config.name + ", " + std::to_string(parameters) + " parameters, " +
+         std::to_string(impl_->config.coarse_iterations) + "+" +
+         std::to_string(impl_->config.fine_iterations) + " iterations, " + impl_->device.str();
+}
+
+DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
+                                       const colmap_io::DepthRange& hint, uint64_t seed) {
+  if (views.size() < 2) throw std::invalid_argument("DepthEstimator: need a reference and a source");
+  if (!hint.valid || !(hint.d_min > 0) || !(hint.d_min < hint.d_max) || !std::isfinite(hint.d_max)) {
+    throw std::invalid_argument("DepthEstimator: invalid depth-range hint");
+  }
+  const cv::Size size = views[0].image.size();
+  std::vector<torch::Tensor> images, intrinsics, extrinsics;
+  for (const ProblemView& view : views) {
+    if (view.image.size() != size) {
+      throw std::invalid_argument("DepthEstimator: all views must have the reference's size");
+    }
+    images.push_back(ImageTensor(view.image));
+    intrinsics.push_back(MatrixTensor(view.K));
+    extrinsics.push_back(PoseTensor(view.R, view.t));
+  }
+  const auto float_on_device = torch::TensorOptions().dtype(torch::kFloat32).device(impl_->device);
+  model::DispMvsInput input;
+  input.images = torch::stack(images).unsqueeze(0).to(float_on_device);
+  input.intrinsics = torch::stack(intrinsics).unsqueeze(0).to(float_on_device);
+  input.extrinsics = torch::stack(extrinsics).unsqueeze(0).to(float_on_device);
+  input.depth_min = torch::tensor({hint.d_min}, torch::kFloat64).to(float_on_device);
+  input.depth_max = torch::tensor({hint.d_max}, torch::kFloat64).to(float_on_device);
+
+  torch::NoGradGuard no_grad;
+  // The initialisation is drawn on the CPU and moved, so CPU and CUDA runs
+  // start from the same random depths.
+  const model::DispMvsOutput output =
+      impl_->net->forward(input, at::make_generator<at::CPUGeneratorImpl>(seed));
+  DepthEstimate estimate;
+  estimate.depth = ToDenseArray(output.depth[0][0]);
+  estimate.confidence = ToDenseArray(output.confidence[0][0] * output.valid[0][0]);
+  return estimate;
+}
+
+}  // namespace dispmvs::dense

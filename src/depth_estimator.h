@@ -1,0 +1,79 @@
+#pragma once
+// The DispMVS network as a depth-map estimator for one stereo problem of a
+// COLMAP workspace: loads the weights once, then per problem turns the
+// workspace's images and cameras into the network's input and its output
+// into COLMAP dense arrays. LibTorch stays behind this interface.
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/core.hpp>
+
+#include "colmap_io/dense_array.h"
+#include "colmap_io/depth_range.h"
+
+namespace dispmvs::dense {
+
+struct EstimatorOptions {
+  // Weights (safetensors with the model configuration in its metadata).
+  std::string model_path;
+  std::string device = "cpu";  // cpu, cuda or cuda:<index>
+  int threads = 0;             // intra-op threads on the CPU; 0 = one per core
+  // GRU iterations per stage; 0 = those the weights were trained with.
+  int coarse_iterations = 0;
+  int fine_iterations = 0;
+
+  // Throws std::invalid_argument naming the command-line option at fault.
+  void Check() const;
+};
+
+// One view of a problem, ready for the network: an RGB CV_32FC3 image in
+// [0, 1] on COLMAP's dense index grid (colmap_io::ResampleToDenseIndexGrid),
+// its COLMAP intrinsics at that size, and its world-to-camera pose.
+struct ProblemView {
+  cv::Mat image;
+  Eigen::Matrix3d K;
+  Eigen::Matrix3d R;
+  Eigen::Vector3d t;
+};
+
+struct DepthEstimate {
+  colmap_io::DenseArray depth;       // 0 where the network has no valid depth
+  colmap_io::DenseArray confidence;  // in [0, 1], 0 where depth is 0
+};
+
+class DepthEstimator {
+ public:
+  // Loads the weights onto the device. Throws std::invalid_argument for bad
+  // options or an unavailable device, std::runtime_error for weights that are
+  // missing, malformed or do not match the network they describe.
+  explicit DepthEstimator(const EstimatorOptions& options);
+  ~DepthEstimator();
+  DepthEstimator(const DepthEstimator&) = delete;
+  DepthEstimator& operator=(const DepthEstimator&) = delete;
+
+  // views[0] is the reference, the others its sources (at least one); all
+  // images have the reference's size. `seed` drives the random
+  // initialisation, so a view's result does not depend on the order or the
+  // machine the views are processed on. The hint must be valid. Non-finite
+  // network outputs read as "no depth".
+  DepthEstimate Estimate(const std::vector<ProblemView>& views, const colmap_io::DepthRange& hint,
+                         uint64_t seed);
+
+  // Reads only the header of the weights file: throws std::runtime_error
+  // ("cannot use the weights PATH: ...") when it is missing or malformed, so
+  // a run can fail before it prints or writes anything.
+  static void CheckWeightsFile(const std::string& model_path);
+
+  // "small, 1675558 parameters, 8+2 iterations, cpu" for logs.
+  std::string Describe() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace dispmvs::dense
