@@ -11,6 +11,7 @@ packages=(
   libeigen3-dev           # geometry in colmap_io and test references
   libopencv-dev           # image I/O and resizing
   libboost-program-options-dev
+  libnanoflann-dev         # k-d trees of the point-cloud evaluation (eval/)
   libgtest-dev libgmock-dev
   colmap                  # the real peer in the interop tests
 )

@@ -1,0 +1,189 @@
+// dispmvs_eval: scores the depth maps of a COLMAP dense workspace (ours,
+// PatchMatch's, any TYPE) against ground-truth depth maps, and point clouds
+// against a ground-truth cloud. See eval/workspace_eval.h for the layout and
+// eval/report.h for the output. Errors print one line "error: <message>" on
+// stderr with exit status 1.
+
+#include <boost/program_options.hpp>
+
+#include <exception>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "eval/report.h"
+#include "eval/workspace_eval.h"
+
+namespace {
+
+namespace po = boost::program_options;
+using namespace dispmvs;
+
+constexpr const char* kDescription = R"(dispmvs_eval: depth-map and point-cloud accuracy against ground truth.
+
+Usage: dispmvs_eval --workspace_path WS [--types T1,T2,...] [--ply FILE ...]
+                    [--json OUT.json] [--png_dir DIR] [--per_view] [options]
+
+WS is a COLMAP dense workspace (WS/sparse with PINHOLE or SIMPLE_PINHOLE
+cameras, WS/images, WS/stereo/depth_maps/NAME.TYPE.bin) with ground truth:
+  WS/ground_truth/depth_maps/NAME.bin   GT depth per image (COLMAP dense array,
+                                        image size, 0 = no surface)
+  WS/ground_truth/points.ply            optional GT cloud (fused.ply layout)
+
+Depth maps (one table row per TYPE, e.g. dispmvs.geometric, geometric): over
+the GT pixels (finite, > 0), a prediction is valid when finite and > 0.
+  coverage   predicted GT pixels / GT pixels
+  abs_rel    mean |d - gt| / gt over the predicted pixels
+  med_rel    median |d - gt| / gt over the predicted pixels (from a log
+             histogram: within 0.12 % of the exact median, exact when the
+             errors near the median are equal)
+  <X%pred    predicted pixels with |d - gt| / gt < X %, of the predicted ones
+  <X%all     the same count, of all GT pixels (a missing prediction = miss)
+Overall rows weight every pixel equally; views = maps found / images with GT.
+Maps smaller than the GT (max_image_size) are compared at their own size,
+sampling the GT at the nearest pixel of the same position in COLMAP's dense
+convention: map pixel (col, row) of a map scaled by s = map size / image size
+is image position (col / s, row / s), raw indices, no half-pixel shift. The
+map must be the GT scaled by one factor with rounded sides.
+
+Point clouds (--ply, fused.ply layout; one row each), against
+WS/ground_truth/points.ply, or without it the GT depth maps back-projected
+(X = R^T (d K^-1 (col / s, row / s, 1) - t), every --gt_stride-th pixel;
+GT maps are read in COLMAP's dense indexing, as dispmvs_synth writes them):
+  accuracy      mean distance reconstruction -> nearest GT point
+  completeness  mean distance GT -> nearest reconstructed point
+                (both ignore distances >= cut-off: acc_cut / comp_cut count them)
+  overall       (accuracy + completeness) / 2
+  precision     reconstructed points within tau of the GT (all points count)
+  recall        GT points within tau of the reconstruction
+  F-score       2 precision recall / (precision + recall)
+Distances are in scene units; tau and the cut-off default to fractions of the
+GT cloud's bounding-box diagonal (--tau_rel, --cutoff_rel).
+
+--png_dir DIR writes, per image with GT, DIR/NAME.gt.png (GT depth) and per
+TYPE DIR/NAME.TYPE.depth.png (same colour scale as the view's GT: its min
+depth blue to its max red, no depth black) and DIR/NAME.TYPE.error.png
+(relative error 0 blue to --png_max_error and above red; GT without a
+prediction white; no GT black). Files are written atomically.
+
+Options)";
+
+struct Options {
+  std::string workspace_path;
+  std::string types;
+  std::string json_path;
+  bool per_view = false;
+  eval::WorkspaceEvalOptions eval;
+};
+
+std::vector<std::string> SplitTypes(const std::string& text) {
+  std::vector<std::string> types;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    const auto begin = item.find_first_not_of(" \t");
+    const auto end = item.find_last_not_of(" \t");
+    if (begin == std::string::npos) {
+      throw std::invalid_argument("--types has an empty entry: '" + text + "'");
+    }
+    types.push_back(item.substr(begin, end - begin + 1));
+  }
+  if (types.empty() || (!text.empty() && text.back() == ',')) {
+    throw std::invalid_argument("--types has an empty entry: '" + text + "'");
+  }
+  return types;
+}
+
+std::optional<Options> ParseCommandLine(int argc, char** argv) {
+  Options o;
+  po::options_description description(kDescription);
+  // clang-format off
+  description.add_options()
+      ("help,h", "Print this help and exit.")
+      ("workspace_path", po::value<std::string>(&o.workspace_path),
+       "Workspace with ground truth (required).")
+      ("types", po::value<std::string>(&o.types),
+       "Comma-separated depth-map TYPEs, e.g. dispmvs.geometric,geometric; default: every "
+       "TYPE found under WS/stereo/depth_maps. A TYPE without maps is reported as such.")
+      ("ply", po::value<std::vector<std::string>>(&o.eval.ply_paths)->multitoken()->composing(),
+       "Point cloud(s) to evaluate (binary PLY as written by stereo_fusion / dispmvs_colmap), "
+       "e.g. WS/fused.ply; repeat or list several.")
+      ("json", po::value<std::string>(&o.json_path),
+       "Also write every number (unrounded, per view too) to this JSON file.")
+      ("png_dir", po::value<std::string>(&o.eval.png_dir),
+       "Write colourised depth and relative-error PNGs here (see above).")
+      ("per_view", po::bool_switch(&o.per_view), "Print one row per view under each TYPE.")
+      ("tau", po::value<double>(&o.eval.tau)->default_value(0),
+       "Precision/recall threshold in scene units; 0 = --tau_rel x GT diagonal.")
+      ("cutoff", po::value<double>(&o.eval.cutoff)->default_value(0),
+       "Outlier cut-off of accuracy/completeness in scene units; 0 = --cutoff_rel x GT "
+       "diagonal.")
+      ("tau_rel", po::value<double>(&o.eval.tau_relative)->default_value(0.002, "0.002"),
+       "Default tau as a fraction of the GT cloud's bounding-box diagonal.")
+      ("cutoff_rel", po::value<double>(&o.eval.cutoff_relative)->default_value(0.02, "0.02"),
+       "Default cut-off as a fraction of the diagonal.")
+      ("gt_stride", po::value<int>(&o.eval.gt_stride)->default_value(1),
+       "Without WS/ground_truth/points.ply: back-project every N-th column and row of the GT "
+       "depth maps.")
+      ("png_max_error", po::value<double>(&o.eval.png_max_rel_error)->default_value(0.05, "0.05"),
+       "Relative error at the top of the error PNGs' colour scale.");
+  // clang-format on
+
+  po::variables_map values;
+  po::store(po::parse_command_line(argc, argv, description), values);
+  if (values.count("help") > 0) {
+    std::cout << description << '\n';
+    return std::nullopt;
+  }
+  po::notify(values);
+  if (values.count("workspace_path") == 0 || o.workspace_path.empty()) {
+    throw std::invalid_argument("--workspace_path is required (see --help)");
+  }
+  if (values.count("types") > 0) o.eval.types = SplitTypes(o.types);
+  // Name the options rather than the fields.
+  if (!(o.eval.tau >= 0)) throw std::invalid_argument("--tau must be >= 0");
+  if (!(o.eval.cutoff >= 0)) throw std::invalid_argument("--cutoff must be >= 0");
+  if (!(o.eval.tau_relative > 0)) throw std::invalid_argument("--tau_rel must be > 0");
+  if (!(o.eval.cutoff_relative > 0)) throw std::invalid_argument("--cutoff_rel must be > 0");
+  if (o.eval.gt_stride < 1) throw std::invalid_argument("--gt_stride must be >= 1");
+  if (!(o.eval.png_max_rel_error > 0)) throw std::invalid_argument("--png_max_error must be > 0");
+  o.eval.Check();
+  return o;
+}
+
+int Run(const Options& options) {
+  const eval::WorkspaceEvalReport report =
+      eval::EvaluateWorkspace(options.workspace_path, options.eval);
+  eval::PrintReport(report, options.per_view, std::cout);
+  if (!options.eval.png_dir.empty()) {
+    std::cout << "png: " << report.png_files << " file(s) in " << options.eval.png_dir << '\n';
+  }
+  if (!options.json_path.empty()) {
+    eval::WriteJsonReport(report, options.json_path);
+    std::cout << "json: " << options.json_path << '\n';
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const std::optional<Options> options = ParseCommandLine(argc, argv);
+    if (!options) return 0;
+    return Run(*options);
+  } catch (const std::exception& error) {
+    std::string message = error.what();
+    for (char& c : message) {
+      if (c == '\n' || c == '\r') c = ' ';
+    }
+    std::cerr << "error: " << message << '\n';
+    return 1;
+  } catch (...) {
+    std::cerr << "error: unknown exception\n";
+    return 1;
+  }
+}

@@ -1,0 +1,366 @@
+// dispmvs_eval end to end: a tiny workspace (one PINHOLE camera, two images,
+// GT depth maps, predictions of known error), the printed table, the JSON
+// file, the PNGs, and the error paths (one "error: " line, exit status 1).
+
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+#include <opencv2/imgcodecs.hpp>
+
+#include "colmap_io/dense_array.h"
+#include "colmap_io/ply.h"
+#include "colmap_io/sparse_model_io.h"
+#include "eval/cloud_metrics.h"
+#include "tests/support/model_builder.h"
+#include "tests/support/temp_dir.h"
+
+#ifndef DISPMVS_EVAL_PROGRAM
+#error "DISPMVS_EVAL_PROGRAM must name the dispmvs_eval binary"
+#endif
+
+namespace dispmvs::eval {
+namespace {
+
+namespace fs = std::filesystem;
+using colmap_io::DenseArray;
+using dispmvs::testing::ReadFileBytes;
+using dispmvs::testing::TempDir;
+using dispmvs::testing::WriteFileBytes;
+
+struct RunResult {
+  int status = -1;
+  std::string out, err;
+};
+
+RunResult RunEval(const TempDir& dir, const std::string& args) {
+  const fs::path out = dir.path() / "stdout.txt";
+  const fs::path err = dir.path() / "stderr.txt";
+  const std::string command = std::string("'") + DISPMVS_EVAL_PROGRAM + "' " + args + " >'" +
+                              out.string() + "' 2>'" + err.string() + "'";
+  const int raw = std::system(command.c_str());
+  RunResult result;
+  result.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
+  result.out = ReadFileBytes(out);
+  result.err = ReadFileBytes(err);
+  return result;
+}
+
+// One "error: ..." line on stderr, exit status 1.
+void ExpectError(const RunResult& result, const std::string& fragment) {
+  EXPECT_EQ(result.status, 1) << result.out << result.err;
+  EXPECT_EQ(result.err.rfind("error: ", 0), 0u) << result.err;
+  ASSERT_FALSE(result.err.empty());
+  EXPECT_EQ(result.err.find('\n'), result.err.size() - 1) << result.err;
+  EXPECT_NE(result.err.find(fragment), std::string::npos) << result.err;
+}
+
+// The number after the n-th occurrence of "KEY": in `json`.
+double JsonNumberAfter(const std::string& json, const std::string& key, int occurrence = 0) {
+  std::size_t at = 0;
+  for (int i = 0; i <= occurrence; ++i) {
+    at = json.find("\"" + key + "\": ", i == 0 ? 0 : at + 1);
+    if (at == std::string::npos) {
+      ADD_FAILURE() << "no \"" << key << "\" #" << occurrence;
+      return std::nan("");
+    }
+  }
+  return std::strtod(json.c_str() + at + key.size() + 4, nullptr);
+}
+
+std::vector<std::string> Lines(const std::string& text) {
+  std::vector<std::string> lines;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+
+class EvalCliTest : public ::testing::Test {
+ protected:
+  static constexpr int kWidth = 8, kHeight = 6;
+
+  void SetUp() override {
+    ws_ = dir_.path() / "ws";
+    dispmvs::testing::ModelBuilder builder;
+    const auto camera = builder.AddPinholeCamera(kWidth, kHeight, 8, 8, 4, 3);
+    const auto a = builder.AddImageWithPose(camera, "a.png", Eigen::Matrix3d::Identity(),
+                                            Eigen::Vector3d::Zero());
+    const auto b = builder.AddImageWithPose(camera, "b.png", Eigen::Matrix3d::Identity(),
+                                            Eigen::Vector3d(-1, 0, 0));
+    builder.AddPoint({0.5, 0, 3}, {a, b});
+    model_ = builder.model();
+    colmap_io::WriteSparseModelBinary(model_, ws_ / "sparse");
+    fs::create_directories(ws_ / "images");
+
+    // GT, all pixels valid (48 per image, 96 in all).
+    for (const char* name : {"a.png", "b.png"}) {
+      DenseArray gt(kWidth, kHeight, 1);
+      for (int r = 0; r < kHeight; ++r) {
+        for (int c = 0; c < kWidth; ++c) {
+          gt.at(r, c) = name[0] == 'a' ? 2.0f + 0.1f * r + 0.05f * c : 3.0f + 0.05f * r;
+        }
+      }
+      colmap_io::WriteDenseArray(gt, ws_ / "ground_truth" / "depth_maps" / (std::string(name) + ".bin"));
+      gt_[name] = gt;
+      // dispmvs.geometric: GT * 1.015 on the left half, nothing on the right.
+      DenseArray pred(kWidth, kHeight, 1, 0.0f);
+      for (int r = 0; r < kHeight; ++r) {
+        for (int c = 0; c < kWidth / 2; ++c) pred.at(r, c) = gt.at(r, c) * 1.015f;
+      }
+      WriteMap(name, "dispmvs.geometric", pred);
+      // half: a 4x3 map (max_image_size 4) equal to the GT at (2 col, 2 row).
+      DenseArray half(kWidth / 2, kHeight / 2, 1);
+      for (int r = 0; r < kHeight / 2; ++r) {
+        for (int c = 0; c < kWidth / 2; ++c) half.at(r, c) = gt.at(2 * r, 2 * c);
+      }
+      WriteMap(name, "half", half);
+    }
+    // geometric: exact, for a.png only.
+    WriteMap("a.png", "geometric", gt_["a.png"]);
+    // Maps of an image the model does not know are ignored.
+    WriteMap("zz.png", "other", gt_["a.png"]);
+  }
+
+  void WriteMap(const std::string& name, const std::string& type, const DenseArray& map) {
+    colmap_io::WriteDenseArray(map, ws_ / "stereo" / "depth_maps" / (name + "." + type + ".bin"));
+  }
+
+  std::string Ws() const { return "--workspace_path '" + ws_.string() + "'"; }
+
+  TempDir dir_;
+  fs::path ws_;
+  colmap_io::SparseModel model_;
+  std::map<std::string, DenseArray> gt_;
+};
+
+TEST_F(EvalCliTest, DepthTablePerViewJsonAndPngs) {
+  const fs::path json = dir_.path() / "out" / "eval.json";
+  const fs::path png = dir_.path() / "png";
+  const RunResult run = RunEval(dir_, Ws() + " --per_view --json '" + json.string() +
+                                          "' --png_dir '" + png.string() + "'");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  EXPECT_EQ(run.err, "");
+  const std::string expected =
+      "workspace: " + ws_.string() + "\n"
+      "depth maps vs ground truth: 2 of 2 images have ground truth\n"
+      "(pred: of the GT pixels with a prediction; all: of all GT pixels)\n"
+      "type               views  coverage  abs_rel  med_rel  <1%pred  <2%pred  <5%pred   <1%all   <2%all   <5%all\n"
+      "dispmvs.geometric    2/2    50.00%   0.0150   0.0150    0.00%  100.00%  100.00%    0.00%   50.00%   50.00%\n"
+      "  a.png                     50.00%   0.0150   0.0150    0.00%  100.00%  100.00%    0.00%   50.00%   50.00%\n"
+      "  b.png                     50.00%   0.0150   0.0150    0.00%  100.00%  100.00%    0.00%   50.00%   50.00%\n"
+      "geometric            1/2   100.00%   0.0000   0.0000  100.00%  100.00%  100.00%  100.00%  100.00%  100.00%\n"
+      "  a.png                    100.00%   0.0000   0.0000  100.00%  100.00%  100.00%  100.00%  100.00%  100.00%\n"
+      "half                 2/2   100.00%   0.0000   0.0000  100.00%  100.00%  100.00%  100.00%  100.00%  100.00%\n"
+      "  a.png                    100.00%   0.0000   0.0000  100.00%  100.00%  100.00%  100.00%  100.00%  100.00%\n"
+      "  b.png                    100.00%   0.0000   0.0000  100.00%  100.00%  100.00%  100.00%  100.00%  100.00%\n"
+      "png: 12 file(s) in " + png.string() + "\n"
+      "json: " + json.string() + "\n";
+  EXPECT_EQ(run.out, expected);
+
+  // JSON: same numbers, unrounded; types in table order.
+  const std::string text = ReadFileBytes(json);
+  int depth = 0;
+  for (const char c : text) {
+    depth += (c == '{' || c == '[') - (c == '}' || c == ']');
+    ASSERT_GE(depth, 0);
+  }
+  EXPECT_EQ(depth, 0);
+  EXPECT_NE(text.find("\"type\": \"dispmvs.geometric\""), std::string::npos);
+  EXPECT_LT(text.find("\"type\": \"dispmvs.geometric\""), text.find("\"type\": \"geometric\""));
+  EXPECT_NE(text.find("\"gt_cloud\": null"), std::string::npos);
+  EXPECT_EQ(JsonNumberAfter(text, "num_images"), 2);
+  EXPECT_EQ(JsonNumberAfter(text, "views_with_gt"), 2);
+  // dispmvs.geometric overall (first "overall" object).
+  EXPECT_EQ(JsonNumberAfter(text, "views"), 2);
+  EXPECT_EQ(JsonNumberAfter(text, "gt_pixels"), 96);
+  EXPECT_EQ(JsonNumberAfter(text, "predicted_pixels"), 48);
+  EXPECT_EQ(JsonNumberAfter(text, "coverage"), 0.5);
+  EXPECT_NEAR(JsonNumberAfter(text, "abs_rel"), 0.015, 1e-6);
+  EXPECT_NEAR(JsonNumberAfter(text, "median_rel"), 0.015, 1e-6);
+  EXPECT_EQ(JsonNumberAfter(text, "within_1_of_predicted"), 0);
+  EXPECT_EQ(JsonNumberAfter(text, "within_2_of_predicted"), 1);
+  EXPECT_EQ(JsonNumberAfter(text, "within_5_of_predicted"), 1);
+  EXPECT_EQ(JsonNumberAfter(text, "within_1_of_gt"), 0);
+  EXPECT_EQ(JsonNumberAfter(text, "within_2_of_gt"), 0.5);
+  EXPECT_EQ(JsonNumberAfter(text, "within_5_of_gt"), 0.5);
+  // Its first view, then the half-size maps' sizes.
+  EXPECT_NE(text.find("\"image\": \"a.png\""), std::string::npos);
+  EXPECT_EQ(JsonNumberAfter(text, "gt_pixels", 1), 48);
+  EXPECT_EQ(JsonNumberAfter(text, "width", 3), 4);  // half, a.png
+  EXPECT_EQ(JsonNumberAfter(text, "gt_width", 3), 8);
+  EXPECT_EQ(JsonNumberAfter(text, "gt_pixels", 6), 12);  // half overall: 2 x 4x3
+
+  // PNGs: GT per image, depth + error per map; the colour scale is the GT's.
+  const cv::Mat gt_png = cv::imread((png / "a.png.gt.png").string(), cv::IMREAD_UNCHANGED);
+  ASSERT_FALSE(gt_png.empty());
+  EXPECT_EQ(gt_png.size(), cv::Size(kWidth, kHeight));
+  EXPECT_EQ(gt_png.type(), CV_8UC3);
+  const cv::Mat half_png = cv::imread((png / "b.png.half.depth.png").string());
+  EXPECT_EQ(half_png.size(), cv::Size(kWidth / 2, kHeight / 2));
+  const cv::Mat exact = cv::imread((png / "a.png.geometric.depth.png").string());
+  ASSERT_FALSE(exact.empty());
+  EXPECT_EQ(cv::norm(exact, gt_png, cv::NORM_INF), 0.0);  // same scale, same depths
+  const cv::Mat error = cv::imread((png / "a.png.dispmvs.geometric.error.png").string());
+  ASSERT_FALSE(error.empty());
+  EXPECT_EQ(error.at<cv::Vec3b>(0, kWidth - 1), cv::Vec3b(255, 255, 255));  // no prediction
+  const cv::Vec3b left = error.at<cv::Vec3b>(0, 0);
+  EXPECT_NE(left, cv::Vec3b(255, 255, 255));
+  EXPECT_NE(left, cv::Vec3b(0, 0, 0));
+  EXPECT_FALSE(fs::exists(png / "b.png.geometric.depth.png"));
+  for (const auto& entry : fs::recursive_directory_iterator(png)) {
+    EXPECT_EQ(entry.path().string().find(".tmp-"), std::string::npos) << entry.path();
+  }
+}
+
+TEST_F(EvalCliTest, ChosenTypesAndPointClouds) {
+  // GT cloud and a reconstruction with hand-computed distances.
+  const std::vector<Eigen::Vector3f> gt = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  const std::vector<Eigen::Vector3f> recon = {{0, 0, 0}, {1, 0, 0}, {0.5f, 0.5f, 0.5f}};
+  const auto to_ply = [](const std::vector<Eigen::Vector3f>& points) {
+    std::vector<colmap_io::PlyPoint> ply(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      ply[i].xyz = {points[i].x(), points[i].y(), points[i].z()};
+    }
+    return ply;
+  };
+  colmap_io::WritePlyPoints(to_ply(gt), ws_ / "ground_truth" / "points.ply");
+  colmap_io::WritePlyPoints(to_ply(recon), ws_ / "fused.ply");
+  const std::string fused = (ws_ / "fused.ply").string();
+
+  // Defaults: tau = 0.2 % and cut-off = 2 % of the diagonal sqrt(3).
+  // recon -> GT: 0, 0, sqrt(0.75) (cut); GT -> recon: 0, 0, sqrt(0.75) x 2 (cut).
+  RunResult run = RunEval(dir_, Ws() + " --types dispmvs.geometric,photometric --ply '" + fused +
+                                    "' --json '" + (dir_.path() / "c.json").string() + "'");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  std::vector<std::string> lines = Lines(run.out);
+  ASSERT_EQ(lines.size(), 12u) << run.out;
+  EXPECT_EQ(lines[4].substr(0, 36), "dispmvs.geometric    2/2    50.00%  ");
+  EXPECT_EQ(lines[5], "photometric        no maps");
+  EXPECT_EQ(lines[6], "");
+  EXPECT_EQ(lines[7], "point clouds vs ground truth: GT " +
+                          (ws_ / "ground_truth" / "points.ply").string() +
+                          ", 4 points, bounding-box diagonal 1.7321");
+  EXPECT_EQ(lines[8],
+            "(distances in scene units; tau 0.0034641 (0.2% of the diagonal), outlier cut-off "
+            "0.034641 (2% of the diagonal))");
+  EXPECT_EQ(lines[9], "ply" + std::string(fused.size() - 3, ' ') +
+                          "  points  accuracy  completeness  overall  acc_cut  comp_cut  "
+                          "precision  recall  F-score");
+  EXPECT_EQ(lines[10], fused + "       3         0             0        0        1         2"
+                               "     66.67%  50.00%   57.14%");
+  const std::string json = ReadFileBytes(dir_.path() / "c.json");
+  EXPECT_NEAR(JsonNumberAfter(json, "bbox_diagonal"), std::sqrt(3.0), 1e-9);
+  EXPECT_NEAR(JsonNumberAfter(json, "fscore"), 4.0 / 7.0, 1e-9);
+  EXPECT_EQ(JsonNumberAfter(json, "accuracy_cut"), 1);
+  EXPECT_EQ(JsonNumberAfter(json, "completeness_cut"), 2);
+  EXPECT_NE(json.find("\"type\": \"photometric\",\n      \"views\": 0"), std::string::npos);
+  EXPECT_NE(json.find("\"overall\": null"), std::string::npos);
+
+  // Thresholds in scene units: nothing cut.
+  run = RunEval(dir_, Ws() + " --types half --ply '" + fused + "' --tau 0.9 --cutoff 1");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  lines = Lines(run.out);
+  ASSERT_EQ(lines.size(), 10u) << run.out;
+  EXPECT_EQ(lines[7], "(distances in scene units; tau 0.9, outlier cut-off 1)");
+  // accuracy sqrt(0.75) / 3 = 0.28868, completeness 2 sqrt(0.75) / 4 = 0.43301.
+  EXPECT_EQ(lines[9], fused + "       3   0.28868       0.43301  0.36084        0         0"
+                              "    100.00%  100.00%  100.00%");
+}
+
+TEST_F(EvalCliTest, GroundTruthCloudFromDepthMaps) {
+  // Without ground_truth/points.ply the GT cloud is the GT maps back-projected;
+  // a reconstruction made the same way matches it exactly.
+  std::vector<colmap_io::PlyPoint> ply;
+  for (const auto& [id, image] : model_.images) {
+    PointCloud points;
+    BackProjectDepthMap(gt_[image.name], model_.cameras.at(image.camera_id), image, 1, &points);
+    for (const Eigen::Vector3f& p : points) {
+      colmap_io::PlyPoint point;
+      point.xyz = {p.x(), p.y(), p.z()};
+      ply.push_back(point);
+    }
+  }
+  ASSERT_EQ(ply.size(), 96u);
+  const fs::path fused = dir_.path() / "from_maps.ply";
+  colmap_io::WritePlyPoints(ply, fused);
+  const RunResult run = RunEval(dir_, Ws() + " --ply '" + fused.string() + "'");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  EXPECT_NE(run.out.find("GT ground-truth depth maps (stride 1), 96 points"), std::string::npos)
+      << run.out;
+  EXPECT_NE(run.out.find(fused.string() + "      96         0             0        0        0"
+                                          "         0    100.00%  100.00%  100.00%\n"),
+            std::string::npos)
+      << run.out;
+  // Stride 2: a quarter of the GT points, all still matched by the reconstruction.
+  const RunResult strided = RunEval(dir_, Ws() + " --gt_stride 2 --ply '" + fused.string() + "'");
+  ASSERT_EQ(strided.status, 0) << strided.out << strided.err;
+  EXPECT_NE(strided.out.find("(stride 2), 24 points"), std::string::npos) << strided.out;
+}
+
+TEST_F(EvalCliTest, MapsOfImagesWithoutGroundTruthAreNotScored) {
+  colmap_io::Image c = model_.images.at(1);
+  c.image_id = 3;
+  c.name = "c.png";
+  c.points2D.clear();
+  model_.images[3] = c;
+  colmap_io::WriteSparseModelBinary(model_, ws_ / "sparse");
+  WriteMap("c.png", "dispmvs.geometric", DenseArray(kWidth, kHeight, 1, 1.0f));
+  WriteMap("c.png", "only_c", DenseArray(kWidth, kHeight, 1, 1.0f));
+  const RunResult run = RunEval(dir_, Ws() + " --types dispmvs.geometric,only_c");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  const std::vector<std::string> lines = Lines(run.out);
+  ASSERT_EQ(lines.size(), 8u) << run.out;
+  EXPECT_EQ(lines[1], "depth maps vs ground truth: 2 of 3 images have ground truth");
+  EXPECT_EQ(lines[4].substr(0, 36), "dispmvs.geometric    2/2    50.00%  ");
+  EXPECT_EQ(lines[5], "only_c             no maps for images with ground truth");
+  EXPECT_EQ(lines[6], "note: dispmvs.geometric: 1 map(s) of images without ground truth, not scored");
+  EXPECT_EQ(lines[7], "note: only_c: 1 map(s) of images without ground truth, not scored");
+  // Only maps of images without ground truth: nothing to score.
+  ExpectError(RunEval(dir_, Ws() + " --types only_c"), "no depth map of type(s) only_c");
+}
+
+TEST_F(EvalCliTest, HelpAndErrors) {
+  RunResult run = RunEval(dir_, "--help");
+  EXPECT_EQ(run.status, 0);
+  EXPECT_NE(run.out.find("Usage: dispmvs_eval --workspace_path WS"), std::string::npos);
+  EXPECT_NE(run.out.find("--png_dir"), std::string::npos);
+
+  ExpectError(RunEval(dir_, ""), "--workspace_path is required");
+  ExpectError(RunEval(dir_, "--workspace_path '" + (dir_.path() / "nope").string() + "'"),
+              "nope");
+  ExpectError(RunEval(dir_, Ws() + " --bogus"), "bogus");
+  ExpectError(RunEval(dir_, Ws() + " --types ,"), "--types");
+  ExpectError(RunEval(dir_, Ws() + " --tau -1"), "--tau");
+  ExpectError(RunEval(dir_, Ws() + " --types photometric,geometric.x"),
+              "no depth map of type(s) photometric, geometric.x for any image with ground truth");
+  ExpectError(RunEval(dir_, Ws() + " --ply '" + (dir_.path() / "missing.ply").string() + "'"),
+              "missing.ply: no such file");
+
+  // A map whose size is not a clean scale of the GT.
+  WriteMap("b.png", "bad", DenseArray(6, 3, 1, 1.0f));
+  ExpectError(RunEval(dir_, Ws() + " --types bad"), "b.png.bad.bin: depth map is 6x3 but its "
+                                                    "ground truth is 8x6");
+  // A truncated map.
+  WriteFileBytes(ws_ / "stereo" / "depth_maps" / "a.png.trunc.bin", "8&6&1&0123456789");
+  ExpectError(RunEval(dir_, Ws() + " --types trunc"), "a.png.trunc.bin");
+  // A GT map of the wrong size.
+  colmap_io::WriteDenseArray(DenseArray(4, 4, 1, 1.0f),
+                             ws_ / "ground_truth" / "depth_maps" / "b.png.bin");
+  ExpectError(RunEval(dir_, Ws() + " --types geometric"),
+              "b.png.bin: ground-truth depth map is 4x4 but its camera is 8x6");
+  // No ground truth at all.
+  fs::remove_all(ws_ / "ground_truth");
+  ExpectError(RunEval(dir_, Ws()), "no ground truth");
+  fs::create_directories(ws_ / "ground_truth" / "depth_maps");
+  ExpectError(RunEval(dir_, Ws()), "no ground-truth depth map NAME.bin for any of the 2 images");
+}
+
+}  // namespace
+}  // namespace dispmvs::eval

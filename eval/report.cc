@@ -1,0 +1,299 @@
+#include "eval/report.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+#include <vector>
+
+#include "colmap_io/atomic_file.h"
+
+namespace dispmvs::eval {
+namespace {
+
+using Row = std::vector<std::string>;
+
+std::string Format(const char* format, double value) {
+  if (!std::isfinite(value)) return "n/a";
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, format, value);
+  return buffer;
+}
+
+std::string Percent(double fraction) { return Format("%.2f%%", 100.0 * fraction); }
+std::string Fraction(double value) { return Format("%.4f", value); }
+std::string Distance(double value) { return Format("%.5g", value); }
+
+// Left-aligned first column, the others right-aligned; two spaces between
+// columns. A row with fewer cells ends early (e.g. "no maps").
+void PrintTable(const std::vector<Row>& rows, std::ostream& out) {
+  std::vector<std::size_t> widths;
+  for (const Row& row : rows) {
+    if (row.size() < 3) continue;  // short rows do not set widths
+    widths.resize(std::max(widths.size(), row.size()), 0);
+    for (std::size_t i = 0; i < row.size(); ++i) widths[i] = std::max(widths[i], row[i].size());
+  }
+  for (const Row& row : rows) {
+    if (!widths.empty()) widths[0] = std::max(widths[0], row.empty() ? 0 : row[0].size());
+  }
+  for (const Row& row : rows) {
+    std::string line;
+    for (std::size_t i = 0; i < row.size(); ++i) {
+      const std::size_t width = i < widths.size() ? widths[i] : 0;
+      const std::size_t pad = width > row[i].size() ? width - row[i].size() : 0;
+      if (i == 0) {
+        line += row[i];
+        if (row.size() > 1) line += std::string(pad, ' ');
+      } else if (row.size() < 3) {
+        line += "  " + row[i];  // free text after the name
+      } else {
+        line += "  " + std::string(pad, ' ') + row[i];
+      }
+    }
+    out << line << '\n';
+  }
+}
+
+Row MetricCells(const std::string& name, const std::string& views, const DepthMetrics& m) {
+  return {name,
+          views,
+          Percent(m.coverage),
+          Fraction(m.abs_rel),
+          Fraction(m.median_rel),
+          Percent(m.within_1_of_predicted),
+          Percent(m.within_2_of_predicted),
+          Percent(m.within_5_of_predicted),
+          Percent(m.within_1_of_gt),
+          Percent(m.within_2_of_gt),
+          Percent(m.within_5_of_gt)};
+}
+
+// ---- JSON ----
+
+std::string JsonString(const std::string& text) {
+  std::string out = "\"";
+  for (const char c : text) {
+    switch (c) {
+      case '"': out += "\\\""; break;
+      case '\\': out += "\\\\"; break;
+      case '\n': out += "\\n"; break;
+      case '\r': out += "\\r"; break;
+      case '\t': out += "\\t"; break;
+      default:
+        if (static_cast<unsigned char>(c) < 0x20) {
+          char buffer[8];
+          std::snprintf(buffer, sizeof buffer, "\\u%04x", static_cast<unsigned>(c));
+          out += buffer;
+        } else {
+          out += c;
+        }
+    }
+  }
+  return out + "\"";
+}
+
+std::string JsonNumber(double value) {
+  if (!std::isfinite(value)) return "null";
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.10g", value);
+  return buffer;
+}
+
+std::string JsonNumber(int64_t value) { return std::to_string(value); }
+
+// Members of one object, joined with commas at the given indent.
+class JsonObject {
+ public:
+  explicit JsonObject(int indent) : indent_(indent) {}
+  JsonObject& Add(const std::string& key, const std::string& raw_value) {
+    members_.push_back(std::string(indent_ + 2, ' ') + JsonString(key) + ": " + raw_value);
+    return *this;
+  }
+  std::string str() const {
+    if (members_.empty()) return "{}";
+    std::string out = "{\n";
+    for (std::size_t i = 0; i < members_.size(); ++i) {
+      out += members_[i] + (i + 1 < members_.size() ? ",\n" : "\n");
+    }
+    return out + std::string(indent_, ' ') + "}";
+  }
+
+ private:
+  int indent_;
+  std::vector<std::string> members_;
+};
+
+std::string JsonArray(const std::vector<std::string>& items, int indent) {
+  if (items.empty()) return "[]";
+  std::string out = "[\n";
+  for (std::size_t i = 0; i < items.size(); ++i) {
+    out += std::string(indent + 2, ' ') + items[i] + (i + 1 < items.size() ? ",\n" : "\n");
+  }
+  return out + std::string(indent, ' ') + "]";
+}
+
+void AddMetrics(const DepthMetrics& m, JsonObject* object) {
+  object->Add("gt_pixels", JsonNumber(m.gt_pixels))
+      .Add("predicted_pixels", JsonNumber(m.predicted))
+      .Add("predicted_without_gt", JsonNumber(m.predicted_without_gt))
+      .Add("coverage", JsonNumber(m.coverage))
+      .Add("abs_rel", JsonNumber(m.abs_rel))
+      .Add("median_rel", JsonNumber(m.median_rel))
+      .Add("within_1_of_predicted", JsonNumber(m.within_1_of_predicted))
+      .Add("within_2_of_predicted", JsonNumber(m.within_2_of_predicted))
+      .Add("within_5_of_predicted", JsonNumber(m.within_5_of_predicted))
+      .Add("within_1_of_gt", JsonNumber(m.within_1_of_gt))
+      .Add("within_2_of_gt", JsonNumber(m.within_2_of_gt))
+      .Add("within_5_of_gt", JsonNumber(m.within_5_of_gt));
+}
+
+}  // namespace
+
+void PrintReport(const WorkspaceEvalReport& report, bool per_view, std::ostream& out) {
+  out << "workspace: " << report.workspace << '\n';
+  out << "depth maps vs ground truth: " << report.views_with_gt << " of " << report.num_images
+      << " images have ground truth\n";
+  out << "(pred: of the GT pixels with a prediction; all: of all GT pixels)\n";
+  std::vector<Row> rows;
+  rows.push_back({"type", "views", "coverage", "abs_rel", "med_rel", "<1%pred", "<2%pred",
+                  "<5%pred", "<1%all", "<2%all", "<5%all"});
+  std::vector<std::string> notes;
+  for (const TypeDepthResult& type : report.types) {
+    if (!type.evaluated()) {
+      rows.push_back({type.type, type.maps_without_gt > 0
+                                     ? "no maps for images with ground truth"
+                                     : "no maps"});
+    } else {
+      rows.push_back(MetricCells(
+          type.type,
+          std::to_string(type.views.size()) + "/" + std::to_string(report.views_with_gt),
+          type.overall));
+      if (per_view) {
+        for (const ViewDepthResult& view : type.views) {
+          rows.push_back(MetricCells("  " + view.image_name, "", view.metrics));
+        }
+      }
+    }
+    if (type.maps_without_gt > 0) {
+      notes.push_back("note: " + type.type + ": " + std::to_string(type.maps_without_gt) +
+                      " map(s) of images without ground truth, not scored");
+    }
+  }
+  PrintTable(rows, out);
+  for (const std::string& note : notes) out << note << '\n';
+
+  if (!report.gt_cloud) return;
+  const GtCloudInfo& gt = *report.gt_cloud;
+  const auto threshold = [&](double value, bool relative, double fraction_of_diagonal) {
+    std::string text = Distance(value);
+    if (relative) text += " (" + Format("%g", 100.0 * fraction_of_diagonal) + "% of the diagonal)";
+    return text;
+  };
+  const double diagonal = gt.bbox_diagonal > 0 ? gt.bbox_diagonal : 1.0;
+  out << "\npoint clouds vs ground truth: GT " << gt.source << ", " << gt.num_points
+      << " points, bounding-box diagonal " << Distance(gt.bbox_diagonal) << '\n';
+  out << "(distances in scene units; tau "
+      << threshold(gt.thresholds.tau, gt.tau_relative, gt.thresholds.tau / diagonal)
+      << ", outlier cut-off "
+      << threshold(gt.thresholds.cutoff, gt.cutoff_relative, gt.thresholds.cutoff / diagonal)
+      << ")\n";
+  if (gt.nonfinite_dropped > 0) {
+    out << "note: ground truth: " << gt.nonfinite_dropped << " non-finite point(s) ignored\n";
+  }
+  rows.clear();
+  notes.clear();
+  rows.push_back({"ply", "points", "accuracy", "completeness", "overall", "acc_cut", "comp_cut",
+                  "precision", "recall", "F-score"});
+  for (const CloudResult& cloud : report.clouds) {
+    const CloudMetrics& m = cloud.metrics;
+    rows.push_back({cloud.ply_path, std::to_string(m.num_points), Distance(m.accuracy),
+                    Distance(m.completeness), Distance(m.overall), std::to_string(m.accuracy_cut),
+                    std::to_string(m.completeness_cut), Percent(m.precision), Percent(m.recall),
+                    Percent(m.fscore)});
+    if (cloud.nonfinite_dropped > 0) {
+      notes.push_back("note: " + cloud.ply_path + ": " + std::to_string(cloud.nonfinite_dropped) +
+                      " non-finite point(s) ignored");
+    }
+  }
+  PrintTable(rows, out);
+  for (const std::string& note : notes) out << note << '\n';
+}
+
+std::string ReportToJson(const WorkspaceEvalReport& report) {
+  JsonObject root(0);
+  root.Add("workspace", JsonString(report.workspace))
+      .Add("num_images", JsonNumber(static_cast<int64_t>(report.num_images)))
+      .Add("views_with_gt", JsonNumber(static_cast<int64_t>(report.views_with_gt)));
+  std::vector<std::string> types;
+  for (const TypeDepthResult& type : report.types) {
+    JsonObject object(4);
+    object.Add("type", JsonString(type.type))
+        .Add("views", JsonNumber(static_cast<int64_t>(type.views.size())))
+        .Add("maps_without_gt", JsonNumber(type.maps_without_gt));
+    if (type.evaluated()) {
+      JsonObject overall(6);
+      AddMetrics(type.overall, &overall);
+      object.Add("overall", overall.str());
+    } else {
+      object.Add("overall", "null");
+    }
+    std::vector<std::string> views;
+    for (const ViewDepthResult& view : type.views) {
+      JsonObject v(8);
+      v.Add("image", JsonString(view.image_name))
+          .Add("width", JsonNumber(static_cast<int64_t>(view.width)))
+          .Add("height", JsonNumber(static_cast<int64_t>(view.height)))
+          .Add("gt_width", JsonNumber(static_cast<int64_t>(view.gt_width)))
+          .Add("gt_height", JsonNumber(static_cast<int64_t>(view.gt_height)));
+      AddMetrics(view.metrics, &v);
+      views.push_back(v.str());
+    }
+    object.Add("per_view", JsonArray(views, 6));
+    types.push_back(object.str());
+  }
+  root.Add("depth", JsonArray(types, 2));
+  if (report.gt_cloud) {
+    const GtCloudInfo& gt = *report.gt_cloud;
+    JsonObject object(2);
+    object.Add("source", JsonString(gt.source))
+        .Add("points", JsonNumber(gt.num_points))
+        .Add("nonfinite_dropped", JsonNumber(gt.nonfinite_dropped))
+        .Add("bbox_diagonal", JsonNumber(gt.bbox_diagonal))
+        .Add("tau", JsonNumber(gt.thresholds.tau))
+        .Add("cutoff", JsonNumber(gt.thresholds.cutoff))
+        .Add("tau_relative", gt.tau_relative ? "true" : "false")
+        .Add("cutoff_relative", gt.cutoff_relative ? "true" : "false");
+    root.Add("gt_cloud", object.str());
+  } else {
+    root.Add("gt_cloud", "null");
+  }
+  std::vector<std::string> clouds;
+  for (const CloudResult& cloud : report.clouds) {
+    const CloudMetrics& m = cloud.metrics;
+    JsonObject object(4);
+    object.Add("ply", JsonString(cloud.ply_path))
+        .Add("points", JsonNumber(m.num_points))
+        .Add("gt_points", JsonNumber(m.num_gt_points))
+        .Add("nonfinite_dropped", JsonNumber(cloud.nonfinite_dropped))
+        .Add("tau", JsonNumber(m.tau))
+        .Add("cutoff", JsonNumber(m.cutoff))
+        .Add("accuracy", JsonNumber(m.accuracy))
+        .Add("completeness", JsonNumber(m.completeness))
+        .Add("overall", JsonNumber(m.overall))
+        .Add("accuracy_cut", JsonNumber(m.accuracy_cut))
+        .Add("completeness_cut", JsonNumber(m.completeness_cut))
+        .Add("precision", JsonNumber(m.precision))
+        .Add("recall", JsonNumber(m.recall))
+        .Add("fscore", JsonNumber(m.fscore));
+    clouds.push_back(object.str());
+  }
+  root.Add("clouds", JsonArray(clouds, 2));
+  return root.str() + "\n";
+}
+
+void WriteJsonReport(const WorkspaceEvalReport& report, const std::filesystem::path& path) {
+  const std::string json = ReportToJson(report);
+  colmap_io::WriteFileAtomically(path, [&](std::ostream& out) { out << json; });
+}
+
+}  // namespace dispmvs::eval

@@ -1,0 +1,306 @@
+#include "eval/workspace_eval.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <set>
+#include <stdexcept>
+#include <system_error>
+#include <utility>
+
+#include "colmap_io/dense_array.h"
+#include "colmap_io/error.h"
+#include "colmap_io/ply.h"
+#include "eval/depth_png.h"
+
+namespace dispmvs::eval {
+namespace {
+
+namespace fs = std::filesystem;
+using colmap_io::IoError;
+
+std::string SizeText(uint64_t width, uint64_t height) {
+  return std::to_string(width) + "x" + std::to_string(height);
+}
+
+// Drops non-finite points (the k-d tree cannot hold them); returns how many.
+int64_t ToCloud(const std::vector<colmap_io::PlyPoint>& ply, PointCloud* cloud) {
+  int64_t dropped = 0;
+  cloud->reserve(cloud->size() + ply.size());
+  for (const colmap_io::PlyPoint& p : ply) {
+    const Eigen::Vector3f xyz(p.xyz[0], p.xyz[1], p.xyz[2]);
+    if (xyz.allFinite()) {
+      cloud->push_back(xyz);
+    } else {
+      ++dropped;
+    }
+  }
+  return dropped;
+}
+
+colmap_io::DenseArray ReadDepthMap(const fs::path& path, const char* what) {
+  colmap_io::DenseArray map = colmap_io::ReadDenseArray(path);
+  if (map.channels() != 1) {
+    throw IoError(path.string(), std::string(what) + " has " + std::to_string(map.channels()) +
+                                     " channels, a depth map has 1");
+  }
+  return map;
+}
+
+bool IsFile(const fs::path& path) {
+  std::error_code ec;
+  return fs::is_regular_file(path, ec);
+}
+
+// The same relative layout as the maps: DIR/NAME.SUFFIX.
+fs::path PngPath(const std::string& dir, const std::string& image_name, const std::string& suffix) {
+  return fs::path(dir) / (image_name + "." + suffix + ".png");
+}
+
+}  // namespace
+
+void WorkspaceEvalOptions::Check() const {
+  for (const std::string& type : types) {
+    if (type.empty() || type.find('/') != std::string::npos ||
+        type.find('\\') != std::string::npos) {
+      throw std::invalid_argument("invalid depth-map type \"" + type + "\"");
+    }
+  }
+  const auto check_distance = [](double value, const char* name) {
+    if (!(std::isfinite(value) && value >= 0)) {
+      throw std::invalid_argument(std::string(name) + " must be >= 0 (0 = relative to the scene)");
+    }
+  };
+  check_distance(tau, "tau");
+  check_distance(cutoff, "cutoff");
+  if (!(std::isfinite(tau_relative) && tau_relative > 0)) {
+    throw std::invalid_argument("tau_rel must be a positive fraction");
+  }
+  if (!(std::isfinite(cutoff_relative) && cutoff_relative > 0)) {
+    throw std::invalid_argument("cutoff_rel must be a positive fraction");
+  }
+  if (gt_stride < 1) throw std::invalid_argument("gt_stride must be >= 1");
+  if (!(std::isfinite(png_max_rel_error) && png_max_rel_error > 0)) {
+    throw std::invalid_argument("png_max_rel_error must be positive");
+  }
+}
+
+fs::path GroundTruthDepthDir(const colmap_io::Workspace& workspace) {
+  return workspace.root() / "ground_truth" / "depth_maps";
+}
+
+fs::path GroundTruthCloudPath(const colmap_io::Workspace& workspace) {
+  return workspace.root() / "ground_truth" / "points.ply";
+}
+
+std::vector<std::string> DiscoverDepthMapTypes(const colmap_io::Workspace& workspace,
+                                               const colmap_io::SparseModel& model) {
+  std::set<std::string> names;
+  for (const auto& [id, image] : model.images) names.insert(image.name);
+  const fs::path dir = workspace.DepthMapsDir();
+  std::set<std::string> types;
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) return {};
+  fs::recursive_directory_iterator it(dir, ec);
+  if (ec) throw IoError(dir.string(), "cannot list: " + ec.message());
+  for (; it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) throw IoError(dir.string(), "cannot list: " + ec.message());
+    std::error_code file_ec;
+    if (!it->is_regular_file(file_ec)) continue;
+    const std::string relative = it->path().lexically_relative(dir).generic_string();
+    const std::string suffix = ".bin";
+    if (relative.size() <= suffix.size() ||
+        relative.compare(relative.size() - suffix.size(), suffix.size(), suffix) != 0) {
+      continue;
+    }
+    const std::string stem = relative.substr(0, relative.size() - suffix.size());
+    // Longest image name first: the rightmost dot that leaves a known name.
+    for (std::size_t dot = stem.rfind('.'); dot != std::string::npos && dot > 0;
+         dot = stem.rfind('.', dot - 1)) {
+      if (dot + 1 < stem.size() && names.count(stem.substr(0, dot)) > 0) {
+        types.insert(stem.substr(dot + 1));
+        break;
+      }
+    }
+  }
+  return {types.begin(), types.end()};
+}
+
+WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
+                                      const WorkspaceEvalOptions& options) {
+  options.Check();
+  const colmap_io::Workspace workspace(workspace_path);
+  const colmap_io::SparseModel model = workspace.ReadModel();
+
+  WorkspaceEvalReport report;
+  report.workspace = workspace.root().string();
+  report.num_images = static_cast<int>(model.images.size());
+
+  // Images in name order, and those with a GT depth map.
+  std::vector<const colmap_io::Image*> images;
+  for (const auto& [id, image] : model.images) images.push_back(&image);
+  std::sort(images.begin(), images.end(),
+            [](const auto* a, const auto* b) { return a->name < b->name; });
+  const fs::path gt_dir = GroundTruthDepthDir(workspace);
+  {
+    std::error_code ec;
+    if (!fs::is_directory(gt_dir, ec)) {
+      throw IoError(gt_dir.string(),
+                    "no ground truth: expected a depth map NAME.bin per image in this folder");
+    }
+  }
+  std::vector<const colmap_io::Image*> gt_images;
+  std::vector<const colmap_io::Image*> images_without_gt;
+  for (const colmap_io::Image* image : images) {
+    workspace.ImagePath(image->name);  // refuses names that would leave the workspace
+    (IsFile(gt_dir / (image->name + ".bin")) ? gt_images : images_without_gt).push_back(image);
+  }
+  if (gt_images.empty()) {
+    throw IoError(gt_dir.string(), "no ground-truth depth map NAME.bin for any of the " +
+                                       std::to_string(images.size()) +
+                                       " images of the sparse model");
+  }
+  report.views_with_gt = static_cast<int>(gt_images.size());
+
+  // Types, and which of them have maps (checked before reading anything big).
+  std::vector<std::string> types;
+  for (const std::string& type :
+       options.types.empty() ? DiscoverDepthMapTypes(workspace, model) : options.types) {
+    if (std::find(types.begin(), types.end(), type) == types.end()) types.push_back(type);
+  }
+  if (types.empty()) {
+    throw IoError(workspace.DepthMapsDir().string(),
+                  "no depth maps NAME.TYPE.bin for the images of the sparse model");
+  }
+  bool any_map = false;
+  for (const std::string& type : types) {
+    TypeDepthResult result;
+    result.type = type;
+    for (const colmap_io::Image* image : images_without_gt) {
+      if (IsFile(workspace.DepthMapPath(image->name, type))) ++result.maps_without_gt;
+    }
+    for (const colmap_io::Image* image : gt_images) {
+      any_map = any_map || IsFile(workspace.DepthMapPath(image->name, type));
+    }
+    report.types.push_back(std::move(result));
+  }
+  if (!any_map) {
+    std::string list;
+    for (const std::string& type : types) list += (list.empty() ? "" : ", ") + type;
+    throw IoError(workspace.DepthMapsDir().string(),
+                  "no depth map of type(s) " + list + " for any image with ground truth");
+  }
+
+  // Clouds: check the files exist before the long part.
+  const fs::path gt_cloud_path = GroundTruthCloudPath(workspace);
+  const bool evaluate_clouds = !options.ply_paths.empty();
+  const bool gt_cloud_from_maps = evaluate_clouds && !IsFile(gt_cloud_path);
+  for (const std::string& ply : options.ply_paths) {
+    if (!IsFile(ply)) throw IoError(ply, "no such file");
+  }
+
+  // Depth maps, view by view (each GT read once).
+  std::vector<DepthMetricSums> type_sums(types.size());
+  PointCloud gt_cloud;
+  const bool write_png = !options.png_dir.empty();
+  for (const colmap_io::Image* image : gt_images) {
+    const fs::path gt_path = gt_dir / (image->name + ".bin");
+    const colmap_io::DenseArray gt = ReadDepthMap(gt_path, "ground-truth depth map");
+    const colmap_io::Camera& camera = model.cameras.at(image->camera_id);
+    if (camera.width > colmap_io::kMaxDenseArraySide ||
+        camera.height > colmap_io::kMaxDenseArraySide ||
+        !IsCleanScale(gt.width(), gt.height(), static_cast<int>(camera.width),
+                      static_cast<int>(camera.height))) {
+      throw IoError(gt_path.string(), "ground-truth depth map is " +
+                                          SizeText(gt.width(), gt.height()) +
+                                          " but its camera is " +
+                                          SizeText(camera.width, camera.height));
+    }
+    if (gt_cloud_from_maps) {
+      try {
+        BackProjectDepthMap(gt, camera, *image, options.gt_stride, &gt_cloud);
+      } catch (const std::invalid_argument& error) {
+        throw IoError(gt_path.string(), error.what());
+      }
+    }
+    DepthRange colour_range;
+    if (write_png) {
+      colour_range = ValidDepthRange(gt);
+      WritePngAtomically(ColouriseDepth(gt, colour_range),
+                         PngPath(options.png_dir, image->name, "gt"));
+      ++report.png_files;
+    }
+    for (std::size_t t = 0; t < types.size(); ++t) {
+      const fs::path map_path = workspace.DepthMapPath(image->name, types[t]);
+      if (!IsFile(map_path)) continue;
+      const colmap_io::DenseArray map = ReadDepthMap(map_path, "depth map");
+      cv::Mat rel_error;
+      DepthMetricSums sums;
+      try {
+        sums = SumDepthMetrics(map, gt, write_png ? &rel_error : nullptr);
+      } catch (const std::invalid_argument& error) {
+        throw IoError(map_path.string(), error.what());
+      }
+      if (write_png) {
+        WritePngAtomically(ColouriseDepth(map, colour_range),
+                           PngPath(options.png_dir, image->name, types[t] + ".depth"));
+        WritePngAtomically(ColouriseRelError(rel_error, options.png_max_rel_error),
+                           PngPath(options.png_dir, image->name, types[t] + ".error"));
+        report.png_files += 2;
+      }
+      ViewDepthResult view;
+      view.image_name = image->name;
+      view.width = map.width();
+      view.height = map.height();
+      view.gt_width = gt.width();
+      view.gt_height = gt.height();
+      view.metrics = Finalize(sums);
+      report.types[t].views.push_back(std::move(view));
+      type_sums[t] += sums;
+    }
+  }
+  for (std::size_t t = 0; t < types.size(); ++t) {
+    report.types[t].overall = Finalize(type_sums[t]);
+  }
+
+  if (!evaluate_clouds) return report;
+
+  // GT cloud and thresholds.
+  GtCloudInfo info;
+  if (gt_cloud_from_maps) {
+    info.source = "ground-truth depth maps (stride " + std::to_string(options.gt_stride) + ")";
+  } else {
+    info.source = gt_cloud_path.string();
+    info.nonfinite_dropped = ToCloud(colmap_io::ReadPlyPoints(gt_cloud_path), &gt_cloud);
+  }
+  if (gt_cloud.empty()) {
+    throw IoError(gt_cloud_from_maps ? gt_dir.string() : gt_cloud_path.string(),
+                  "the ground-truth point cloud is empty");
+  }
+  info.num_points = static_cast<int64_t>(gt_cloud.size());
+  info.bbox_diagonal = BoundingBoxDiagonal(gt_cloud);
+  info.tau_relative = options.tau == 0;
+  info.cutoff_relative = options.cutoff == 0;
+  info.thresholds.tau = info.tau_relative ? options.tau_relative * info.bbox_diagonal : options.tau;
+  info.thresholds.cutoff =
+      info.cutoff_relative ? options.cutoff_relative * info.bbox_diagonal : options.cutoff;
+  if (!(info.thresholds.tau > 0) || !(info.thresholds.cutoff > 0)) {
+    throw IoError(info.source, "the ground-truth cloud has no extent (bounding-box diagonal " +
+                                   std::to_string(info.bbox_diagonal) +
+                                   "): give --tau and --cutoff in scene units");
+  }
+  const NearestNeighbourIndex gt_index(std::move(gt_cloud));
+  for (const std::string& ply : options.ply_paths) {
+    CloudResult result;
+    result.ply_path = ply;
+    PointCloud points;
+    result.nonfinite_dropped = ToCloud(colmap_io::ReadPlyPoints(ply), &points);
+    const NearestNeighbourIndex index(std::move(points));
+    result.metrics = EvaluateCloud(index, gt_index, info.thresholds);
+    report.clouds.push_back(std::move(result));
+  }
+  report.gt_cloud = info;
+  return report;
+}
+
+}  // namespace dispmvs::eval
