@@ -1,5 +1,6 @@
-// dispmvs_train: trains DispMVS on generated scenes, or evaluates weights on
-// the fixed validation scenes with the depth-range hint widened x = 1, 2, 3.
+// dispmvs_train: trains DispMVS on generated scenes (optionally mixed with an
+// MVSNet-format data set), or evaluates weights on the fixed validation
+// scenes with the depth-range hint widened x = 1, 2, 3.
 //
 //   dispmvs_train --checkpoint_dir DIR [options]     train (resumes from DIR)
 //   dispmvs_train --evaluate WEIGHTS [options]        print the validation table
@@ -35,6 +36,12 @@ options (default):
   --lr LR                     Adam learning rate (2e-4)
   --lr_halve_every K          halve the learning rate every K steps, 0 = never (0)
   --grad_clip C               max gradient norm, 0 = off (1)
+  --train_widening_max X      widen each step's depth-range hint by x, log-uniform in [1, X],
+                              so the model does not lean on a tight range; 1 = off (1)
+  --mvsnet_root DIR           also train on an MVSNet-format data set (DTU/BlendedMVS layout:
+                              images/, cams/*_cam.txt, pair.txt, depths/*.pfm; one scan or a
+                              folder of scans); validation stays on generated scenes (none)
+  --mvsnet_fraction F         share of samples drawn from that data set, the rest generated (1)
   --seed S                    run seed (0)
   --device cpu|cuda|cuda:I    (cpu)
   --threads T                 intra-op threads, 0 = one per core (0)
@@ -116,6 +123,9 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--lr") o.lr = ParseDouble(flag, value);
     else if (flag == "--lr_halve_every") o.lr_halve_every = ParseInt(flag, value);
     else if (flag == "--grad_clip") o.grad_clip = ParseDouble(flag, value);
+    else if (flag == "--train_widening_max") o.train_widening_max = ParseDouble(flag, value);
+    else if (flag == "--mvsnet_root") o.mvsnet_root = value;
+    else if (flag == "--mvsnet_fraction") o.mvsnet_fraction = ParseDouble(flag, value);
     else if (flag == "--seed") o.seed = ParseUnsigned(flag, value);
     else if (flag == "--device") o.device = value;
     else if (flag == "--threads") o.threads = ParseInt(flag, value);

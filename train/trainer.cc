@@ -10,6 +10,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <thread>
@@ -20,6 +21,7 @@
 #include "model/safetensors.h"
 #include "synth/generator.h"
 #include "train/batch.h"
+#include "train/mvsnet_dataset.h"
 
 namespace dispmvs::train {
 namespace {
@@ -96,6 +98,48 @@ synth::SynthSample GenerateUsableSample(const synth::SynthConfig& config, uint64
                            " draws from seed " + std::to_string(seed));
 }
 
+// The MVSNet data set of a run (TrainOptions::mvsnet_root) and the reference
+// views that samples are drawn from.
+struct MvsnetSource {
+  MvsnetDataset dataset;
+  std::vector<MvsnetViewRef> views;
+  MvsnetSampleOptions sample_options;
+};
+
+// Opened once, before the first step, so that a bad data set fails the run
+// at once rather than at the first step that happens to draw from it.
+std::optional<MvsnetSource> OpenMvsnetSource(const TrainOptions& options, const synth::SynthConfig& synth_config) {
+  if (options.mvsnet_root.empty()) return std::nullopt;
+  RequireMvsnetImageDecoding();
+  MvsnetSource source;
+  source.dataset = OpenMvsnetDataset(options.mvsnet_root);
+  source.views = MvsnetTrainingViews(source.dataset, options.num_sources);
+  if (source.views.empty()) {
+    throw std::runtime_error(options.mvsnet_root + ": no reference view with a ground-truth depth map and at least " +
+                             std::to_string(options.num_sources) + " source views");
+  }
+  source.sample_options.height = options.height;
+  source.sample_options.width = options.width;
+  source.sample_options.num_sources = options.num_sources;
+  source.sample_options.dtype = synth_config.dtype;  // batches mix both kinds
+  return source;
+}
+
+// Sample `index` of training step `step`: from the data set with probability
+// mvsnet_fraction, else a generated scene; both the choice and the reference
+// view follow from TrainingSampleSeed alone, so runs stay reproducible.
+synth::SynthSample TrainingSample(const TrainOptions& options, const synth::SynthConfig& synth_config,
+                                  const std::optional<MvsnetSource>& mvsnet, int64_t step, int64_t index,
+                                  torch::Device device) {
+  const uint64_t seed = TrainingSampleSeed(options.seed, step, index);
+  if (mvsnet) {
+    if (const auto view = ChooseMvsnetView(seed, options.mvsnet_fraction, mvsnet->views.size())) {
+      return LoadMvsnetSample(mvsnet->dataset, mvsnet->views[*view], mvsnet->sample_options, device);
+    }
+  }
+  return GenerateUsableSample(synth_config, seed, device);
+}
+
 void SetThreads(int64_t threads) {
   if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
   torch::set_num_threads(static_cast<int>(threads));
@@ -156,14 +200,28 @@ std::vector<int64_t> CompleteCheckpoints(const fs::path& dir) {
   return steps;
 }
 
+// The data set as a setting: its absolute path, so that a resumed run may
+// name it relative to another working directory.
+std::string MvsnetRootSetting(const std::string& root) {
+  if (root.empty()) return "";
+  std::error_code error;
+  const fs::path canonical = fs::weakly_canonical(fs::absolute(root), error);
+  return (error ? fs::absolute(root).lexically_normal() : canonical).string();
+}
+
 // The settings that change what a step computes: a checkpoint can only be
 // resumed by a run with the same ones (the total step count may differ).
 std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
-  std::ostringstream lr, clip;
+  std::ostringstream lr, clip, widening;
   lr.precision(17);
   clip.precision(17);
+  widening.precision(17);
   lr << o.lr;
   clip << o.grad_clip;
+  widening << o.train_widening_max;
+  std::ostringstream mvsnet_fraction;
+  mvsnet_fraction.precision(17);
+  mvsnet_fraction << o.mvsnet_fraction;
   return {{"config", o.config},
           {"height", std::to_string(o.height)},
           {"width", std::to_string(o.width)},
@@ -172,7 +230,19 @@ std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
           {"seed", std::to_string(o.seed)},
           {"lr", lr.str()},
           {"lr_halve_every", std::to_string(o.lr_halve_every)},
-          {"grad_clip", clip.str()}};
+          {"grad_clip", clip.str()},
+          {"train_widening_max", widening.str()},
+          {"mvsnet_root", MvsnetRootSetting(o.mvsnet_root)},
+          {"mvsnet_fraction", mvsnet_fraction.str()}};
+}
+
+// Settings added after checkpoints were first written, with the value that a
+// checkpoint without one was trained with, so that such checkpoints resume.
+std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
+  if (key == "mvsnet_root") return "";
+  if (key == "mvsnet_fraction") return "1";
+  if (key == "train_widening_max") return "1";
+  return std::nullopt;
 }
 
 // Adam keeps its per-parameter state under this key (LibTorch's convention).
@@ -214,9 +284,11 @@ void LoadCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, torch::o
   const auto file = model::LoadSafetensors(optim_path);
   for (const auto& [key, value] : RunSettings(options)) {
     const auto found = file.metadata.find(key);
-    if (found == file.metadata.end() || found->second != value) {
+    const std::optional<std::string> stored =
+        found != file.metadata.end() ? std::optional<std::string>(found->second) : SettingBeforeItExisted(key);
+    if (!stored || *stored != value) {
       throw std::runtime_error(optim_path + ": checkpoint of a different run (" + key + " is '" +
-                               (found == file.metadata.end() ? "<missing>" : found->second) +
+                               stored.value_or("<missing>") +
                                "', this run has '" + value + "'); use another checkpoint dir");
     }
   }
@@ -290,6 +362,9 @@ void TrainOptions::Check(bool for_training) const {
   if (!(std::isfinite(grad_clip) && grad_clip >= 0)) {
     fail("grad_clip must be a finite number >= 0, got " + std::to_string(grad_clip));
   }
+  if (!(std::isfinite(train_widening_max) && train_widening_max >= 1 && train_widening_max <= 1000)) {
+    fail("train_widening_max must be in [1, 1000], got " + std::to_string(train_widening_max));
+  }
   ParseDevice(device);
   if (threads < 0 || threads > 1024) fail("threads must be in [0, 1024], got " + std::to_string(threads));
   if (checkpoint_every < 1) fail("checkpoint_every must be >= 1, got " + std::to_string(checkpoint_every));
@@ -301,6 +376,11 @@ void TrainOptions::Check(bool for_training) const {
     fail("validation_seed_base must be below 2^63 - 100000 (training seeds use the top bit)");
   }
   if (for_training && checkpoint_dir.empty()) fail("checkpoint_dir is required for training");
+  if (!(mvsnet_fraction >= 0 && mvsnet_fraction <= 1)) {
+    fail("mvsnet_fraction must be in [0, 1], got " + std::to_string(mvsnet_fraction));
+  }
+  // A fraction of a data set that is not there is a mistake, not a request.
+  if (mvsnet_root.empty() && mvsnet_fraction != 1) fail("mvsnet_fraction needs mvsnet_root");
   SynthConfigFor(*this);  // the generator's own limits
 }
 
@@ -311,6 +391,14 @@ double LearningRateAt(const TrainOptions& options, int64_t step) {
 
 uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index) {
   return Mix(Mix(seed, static_cast<uint64_t>(step)), static_cast<uint64_t>(index)) | kTopBit;
+}
+
+double TrainingWideningAt(const TrainOptions& options, int64_t step) {
+  if (options.train_widening_max <= 1.0) return 1.0;
+  // 53 random bits -> u in [0, 1).
+  const uint64_t bits = Mix(Mix(options.seed, 0x1D3A7Eu), static_cast<uint64_t>(step)) >> 11;
+  const double u = static_cast<double>(bits) * (1.0 / 9007199254740992.0);
+  return std::exp(u * std::log(options.train_widening_max));
 }
 
 std::string FormatMetrics(const DepthMetrics& m) {
@@ -346,6 +434,12 @@ void Train(const TrainOptions& options, std::ostream& console) {
   }
 
   const auto synth_config = SynthConfigFor(options);
+  const auto mvsnet = OpenMvsnetSource(options, synth_config);
+  if (mvsnet) {
+    log.Line("MVSNet data set " + options.mvsnet_root + ": " + std::to_string(mvsnet->dataset.scans.size()) +
+             " scans, " + std::to_string(mvsnet->views.size()) + " reference views with ground truth, fraction " +
+             std::to_string(options.mvsnet_fraction));
+  }
   const auto validation_scenes = ValidationScenes(options, device);
   auto validate = [&](int64_t step) {
     if (validation_scenes.empty()) return;
@@ -365,12 +459,14 @@ void Train(const TrainOptions& options, std::ostream& console) {
 
     std::vector<synth::SynthSample> samples;
     for (int64_t j = 0; j < options.batch_size; ++j) {
-      samples.push_back(GenerateUsableSample(synth_config, TrainingSampleSeed(options.seed, step, j), device));
+      samples.push_back(TrainingSample(options, synth_config, mvsnet, step, j, device));
     }
-    const auto batch = MakeBatch(samples);
+    const double widening = TrainingWideningAt(options, step);
+    const auto batch = MakeBatch(samples, widening);
     const auto output = net->forward(batch.input, CpuGenerator(TrainingInitSeed(options.seed, step)));
+    // Normalised by the unwidened range (see TrainOptions::train_widening_max).
     const auto loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
-                                          batch.input.depth_min, batch.input.depth_max);
+                                          batch.input.depth_min * widening, batch.input.depth_max / widening);
     optimizer.zero_grad();
     loss.backward();
     if (options.grad_clip > 0) torch::nn::utils::clip_grad_norm_(net->parameters(), options.grad_clip);

@@ -41,6 +41,20 @@ struct TrainOptions {
   double lr = 2e-4;
   int64_t lr_halve_every = 0;  // halve lr every K steps; 0 = constant
   double grad_clip = 1.0;      // max global gradient norm; 0 = no clipping
+  // Depth-range augmentation: each step widens the hint of its samples to
+  // (d_min / x, d_max * x) with x log-uniform in [1, train_widening_max], so
+  // the network learns not to lean on a tight range (the robustness protocol
+  // evaluates x = 2, 3). The loss stays normalised by the unwidened range,
+  // so widened steps weigh as much as the others. 1 = off.
+  double train_widening_max = 1.0;
+  // Real images next to the generated scenes: an MVSNet-format data set
+  // (train/mvsnet_dataset.h; empty = generated scenes only). Each training
+  // sample comes from it with probability mvsnet_fraction, drawn from the
+  // sample's seed, like the reference view it uses; only references with
+  // ground-truth depth and >= num_sources sources are drawn. Validation
+  // stays on generated scenes, so its numbers stay comparable across runs.
+  std::string mvsnet_root;
+  double mvsnet_fraction = 1.0;  // in [0, 1]; must stay 1 without mvsnet_root
   uint64_t seed = 0;
   std::string device = "cpu";  // "cpu", "cuda" or "cuda:<i>"
   int64_t threads = 0;         // intra-op threads; 0 = one per core
@@ -62,6 +76,10 @@ double LearningRateAt(const TrainOptions& options, int64_t step);
 // Seed of sample `index` of training step `step`: top bit set, disjoint from
 // every validation seed.
 uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index);
+
+// The depth-range widening x of training step `step`: log-uniform in
+// [1, options.train_widening_max], a function of (seed, step) alone.
+double TrainingWideningAt(const TrainOptions& options, int64_t step);
 
 // Runs (or resumes) training as described above. Log lines go to `log` and
 // to train.log. Throws std::invalid_argument on bad options and

@@ -1,5 +1,6 @@
 #include "train/trainer.h"
 
+#include <cmath>
 #include <filesystem>
 #include <set>
 #include <sstream>
@@ -163,6 +164,11 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o.device = "tpu";
   ExpectRejected(o, "device");
   o = good;
+  o.train_widening_max = 0.5;
+  ExpectRejected(o, "train_widening_max");
+  o.train_widening_max = std::nan("");
+  ExpectRejected(o, "train_widening_max");
+  o = good;
   o.checkpoint_every = 0;
   ExpectRejected(o, "checkpoint_every");
   o = good;
@@ -185,6 +191,45 @@ TEST(TrainerTest, LearningRateHalvesEveryKStepsAndSeedsAreDisjoint) {
   EXPECT_GE(TrainingSampleSeed(0, 0, 0), uint64_t{1} << 63);
   EXPECT_NE(TrainingSampleSeed(0, 0, 1), TrainingSampleSeed(0, 1, 0));
   EXPECT_NE(TrainingSampleSeed(0, 1, 0), TrainingSampleSeed(1, 1, 0));
+}
+
+TEST(TrainerTest, TrainingWideningIsLogUniformAndDeterministic) {
+  TrainOptions o;
+  EXPECT_EQ(TrainingWideningAt(o, 7), 1.0);  // off by default
+  o.train_widening_max = 3;
+  int below_sqrt3 = 0;
+  const int n = 4000;
+  for (int step = 0; step < n; ++step) {
+    const double x = TrainingWideningAt(o, step);
+    ASSERT_GE(x, 1.0);
+    ASSERT_LT(x, 3.0);
+    ASSERT_EQ(x, TrainingWideningAt(o, step));
+    below_sqrt3 += x < std::sqrt(3.0);
+  }
+  // Log-uniform: half the draws below sqrt(3) (binomial sd ~ 32 of 4000).
+  EXPECT_NEAR(below_sqrt3, n / 2, 160);
+  TrainOptions other = o;
+  other.seed = 1;
+  EXPECT_NE(TrainingWideningAt(o, 3), TrainingWideningAt(other, 3));
+}
+
+// A widened run computes other steps than an unwidened one, and resuming it
+// with another widening is refused.
+TEST(TrainerTest, WideningChangesTrainingAndIsARunSetting) {
+  TempDir tmp;
+  auto plain = TinyOptions(tmp.path() / "plain", 2);
+  auto widened = TinyOptions(tmp.path() / "widened", 2);
+  widened.train_widening_max = 3;
+  EXPECT_NE(RunAndReadWeights(plain), RunAndReadWeights(widened));
+  std::ostringstream log;
+  widened.steps = 3;
+  widened.train_widening_max = 2;
+  try {
+    Train(widened, log);
+    FAIL() << "expected a refusal";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("different run (train_widening_max"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace
