@@ -24,10 +24,13 @@
 #include <thread>
 #include <vector>
 
+#include <Eigen/Core>
+#include <Eigen/LU>
 #include <gtest/gtest.h>
 
 #include "colmap_io/dense_array.h"
 #include "colmap_io/ply.h"
+#include "colmap_io/sparse_model.h"
 #include "colmap_io/workspace.h"
 #include "examples/example_workspace.h"
 #include "examples/surface_distance.h"
@@ -148,7 +151,10 @@ TEST_F(ExampleDenseTest, RunsEveryPassAndSummarises) {
 TEST_F(ExampleDenseTest, NormalAndConfidenceMapsAreWellFormed) {
   ASSERT_EQ(status_, 0) << log_;
   const colmap_io::Workspace workspace(root_);
-  for (const auto& [image_id, image] : workspace.ReadModel().images) {
+  const colmap_io::SparseModel model = workspace.ReadModel();
+  for (const auto& [image_id, image] : model.images) {
+    // The maps are at full size: COLMAP's dense convention X = d K^-1 (col, row, 1).
+    const Eigen::Matrix3d K_inverse = model.cameras.at(image.camera_id).CalibrationMatrix().inverse();
     const DenseArray depth =
         colmap_io::ReadDenseArray(workspace.DepthMapPath(image.name, "dispmvs.photometric"));
     const DenseArray normal =
@@ -170,7 +176,10 @@ TEST_F(ExampleDenseTest, NormalAndConfidenceMapsAreWellFormed) {
       ++with_normal;
       ASSERT_NEAR(length, 1.0, 1e-5);
       ASSERT_GT(depth.data()[i], 0) << "normal without depth";
-      ASSERT_LT(nz, 0) << "normals point towards the camera (z < 0 in the camera frame)";
+      const int row = static_cast<int>(i) / depth.width(), col = static_cast<int>(i) % depth.width();
+      const Eigen::Vector3d ray = K_inverse * Eigen::Vector3d(col, row, 1);
+      ASSERT_LT(Eigen::Vector3d(nx, ny, nz).dot(ray), 0)
+          << "normals point towards the camera (n . X < 0 in the camera frame)";
     }
     EXPECT_GT(with_normal, plane / 2) << image.name;
   }
