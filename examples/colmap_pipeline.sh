@@ -70,7 +70,10 @@ colmap model_aligner --input_path "$out/sparse/0" --output_path "$out/aligned" \
 cat "$out/aligner.log" >> "$out/colmap.log"
 registered=$(colmap model_analyzer --path "$out/aligned" 2>&1 | awk -F': ' '/Registered images/ {print $2}')
 alignment_error=$(awk '/Alignment error/ {print $4; exit}' "$out/aligner.log")
-echo "registered images: ${registered:-?} of $(ls "$truth/images" | wc -l); mean camera-centre alignment error: ${alignment_error:-?} (scene depths 3 to 10)"
+num_images=$(ls "$truth/images" | wc -l)
+echo "registered images: ${registered:-?} of $num_images; mean camera-centre alignment error: ${alignment_error:-?} (scene depths 3 to 10)"
+[ "${registered:-0}" = "$num_images" ] || {
+  echo "error: the mapper registered ${registered:-0} of $num_images images (see $out/colmap.log)" >&2; exit 1; }
 # The example's cameras are 1 to 3 units apart: an SfM frame off by more
 # than 0.05 would make the ground-truth comparison meaningless.
 awk -v e="${alignment_error:-1e9}" 'BEGIN { exit !(e < 0.05) }' || {
