@@ -13,6 +13,7 @@ packages=(
   libboost-program-options-dev
   libnanoflann-dev         # k-d trees of the point-cloud evaluation (eval/)
   libgtest-dev libgmock-dev
+  libbenchmark-dev        # microbenchmarks in bench/
   colmap                  # the real peer in the interop tests
 )
 $SUDO apt-get update -qq

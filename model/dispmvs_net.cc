@@ -6,11 +6,19 @@
 #include "model/convex_upsample.h"
 #include "model/correlation.h"
 #include "model/geometry.h"
+#include "model/stage_timer.h"
 
 namespace dispmvs::model {
 namespace {
 
 namespace F = torch::nn::functional;
+
+// Runs f() as one section of `stage` (no-op timing when timer is null).
+template <typename Fn>
+auto Timed(StageTimer* timer, NetStage stage, Fn&& f) -> decltype(f()) {
+  const StageTimer::Section section(timer, stage);
+  return f();
+}
 
 // A map and the mask of where it holds a value.
 struct MaskedMap {
@@ -187,11 +195,16 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
     throw std::runtime_error("DispMvsNet: context encoder returned too few channels");
   }
 
-  const EpipolarPair pair =
-      MakeEpipolarPair(ScaleIntrinsics(in.K_ref, scale), ScaleIntrinsics(in.K_src, scale), in.R,
-                       in.T, h, w);
-  const EpipolarDirection direction = ComputeEpipolarDirection(pair);
-  const EpipolarCorrelation correlation(in.src_features, in.levels, in.samples);
+  StageTimer* const timer = stage_timer_;
+  const EpipolarPair pair = Timed(timer, NetStage::kGeometry, [&] {
+    return MakeEpipolarPair(ScaleIntrinsics(in.K_ref, scale), ScaleIntrinsics(in.K_src, scale),
+                            in.R, in.T, h, w);
+  });
+  const EpipolarDirection direction =
+      Timed(timer, NetStage::kGeometry, [&] { return ComputeEpipolarDirection(pair); });
+  const EpipolarCorrelation correlation = Timed(timer, NetStage::kCorrelation, [&] {
+    return EpipolarCorrelation(in.src_features, in.levels, in.samples);
+  });
   const torch::Tensor ref_features = RepeatPerSource(in.ref_features, n);
 
   // Context: hidden state (tanh) and per-iteration input (relu), one copy per
@@ -204,26 +217,38 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
   // Base point and direction are fixed for the whole stage; the E-flow is the
   // offset from the base (method notes, "E-flow").
   torch::Tensor state = in.init_inv_depth;  // [B,1,h,w], detached
-  const torch::Tensor base_xy = ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy;
+  const torch::Tensor base_xy = Timed(timer, NetStage::kGeometry, [&] {
+    return ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy;
+  });
 
   StageResult result;
   for (int64_t t = 0; t < in.iterations; ++t) {
     const bool last = t + 1 == in.iterations;
     // Reset every source's E-flow from the fused depth: keeps the views
     // consistent (the first iteration gives exactly 0).
-    const torch::Tensor eflow = SourcePixelToEflow(
-        base_xy, direction.dir, ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy);
-    const CorrelationSamples cost = correlation.Lookup(ref_features, base_xy, direction.dir, eflow);
-    const UpdateBlockOutput update = block->forward(hidden, context, cost.cost, eflow);
+    const torch::Tensor eflow = Timed(timer, NetStage::kGeometry, [&] {
+      return SourcePixelToEflow(base_xy, direction.dir,
+                                ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy);
+    });
+    const CorrelationSamples cost = Timed(timer, NetStage::kCorrelation, [&] {
+      return correlation.Lookup(ref_features, base_xy, direction.dir, eflow);
+    });
+    const UpdateBlockOutput update = Timed(timer, NetStage::kUpdate, [&] {
+      return block->forward(hidden, context, cost.cost, eflow);
+    });
     hidden = update.hidden;
 
-    const torch::Tensor src_xy =
-        EflowToSourcePixel(base_xy, direction.dir, eflow + update.delta_eflow);
-    const InverseDepth triangulated = TriangulateInverseDepth(pair, src_xy);
+    const torch::Tensor src_xy = Timed(timer, NetStage::kGeometry, [&] {
+      return EflowToSourcePixel(base_xy, direction.dir, eflow + update.delta_eflow);
+    });
+    const InverseDepth triangulated =
+        Timed(timer, NetStage::kGeometry, [&] { return TriangulateInverseDepth(pair, src_xy); });
     const torch::Tensor pair_valid = triangulated.valid & direction.valid;
-    const FusedInverseDepth fused =
-        FuseInverseDepths(triangulated.inv_depth.view({b, n, h, w}),
-                          update.weight_logit.view({b, n, h, w}), pair_valid.view({b, n, h, w}));
+    const FusedInverseDepth fused = Timed(timer, NetStage::kGeometry, [&] {
+      return FuseInverseDepths(triangulated.inv_depth.view({b, n, h, w}),
+                               update.weight_logit.view({b, n, h, w}),
+                               pair_valid.view({b, n, h, w}));
+    });
 
     StageResult::Iteration it;
     it.inv_depth.valid = fused.valid;
@@ -232,7 +257,9 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
     if (in.keep_every_iteration || last) {
       // One mask per reference pixel, from the hidden state averaged over
       // the sources.
-      it.mask_logits = block->MaskLogits(hidden.view({b, n, hid, h, w}).mean(1));
+      it.mask_logits = Timed(timer, NetStage::kUpdate, [&] {
+        return block->MaskLogits(hidden.view({b, n, hid, h, w}).mean(1));
+      });
     }
     if (last) {
       const torch::Tensor fused_w = it.inv_depth.value;  // [B,1,h,w]
@@ -272,9 +299,12 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
     images = F::pad(images, F::PadFuncOptions({0, padded_w - width, 0, padded_h - height})
                                 .mode(torch::kReplicate));
   }
-  const FeaturePyramid matching = matching_encoder_->forward(images);
-  const FeaturePyramid context =
-      context_encoder_->forward(images.view({b, v, 3, padded_h, padded_w}).select(1, 0));
+  StageTimer* const timer = stage_timer_;
+  const FeaturePyramid matching =
+      Timed(timer, NetStage::kEncoders, [&] { return matching_encoder_->forward(images); });
+  const FeaturePyramid context = Timed(timer, NetStage::kEncoders, [&] {
+    return context_encoder_->forward(images.view({b, v, 3, padded_h, padded_w}).select(1, 0));
+  });
   const auto split = [&](const torch::Tensor& f, torch::Tensor& ref, torch::Tensor& src) {
     const torch::Tensor views = f.view({b, v, f.size(1), f.size(2), f.size(3)});
     ref = views.select(1, 0);
@@ -282,7 +312,9 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   };
 
   const torch::Tensor K = input.intrinsics.to(opts);
-  const RelativePoses poses = ReferenceToSourcePoses(input.extrinsics.to(opts));
+  const RelativePoses poses = Timed(timer, NetStage::kGeometry, [&] {
+    return ReferenceToSourcePoses(input.extrinsics.to(opts));
+  });
 
   StageInput stage;
   stage.batch = b;
@@ -301,10 +333,12 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   stage.levels = config_.coarse_levels;
   stage.samples = config_.coarse_samples;
   stage.iterations = config_.coarse_iterations;
-  stage.init_inv_depth = RandomInverseDepth(d_min, d_max, stage.ref_features.size(2),
-                                            stage.ref_features.size(3), gen)
-                             .to(opts)
-                             .detach();
+  stage.init_inv_depth = Timed(timer, NetStage::kGeometry, [&] {
+    return RandomInverseDepth(d_min, d_max, stage.ref_features.size(2),
+                              stage.ref_features.size(3), gen)
+        .to(opts)
+        .detach();
+  });
   const StageResult coarse = RunStage(stage, coarse_block_);
 
   // Fine stage from the convex-upsampled coarse state.
@@ -316,40 +350,45 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   stage.levels = config_.fine_levels;
   stage.samples = config_.fine_samples;
   stage.iterations = config_.fine_iterations;
-  stage.init_inv_depth =
-      ConvexUpsample(coarse.state, coarse_mask, kUpsampleFactor).detach();
+  stage.init_inv_depth = Timed(timer, NetStage::kUpsampling, [&] {
+    return ConvexUpsample(coarse.state, coarse_mask, kUpsampleFactor).detach();
+  });
   const StageResult fine = RunStage(stage, fine_block_);
 
-  // Outputs at full resolution.
+  // Outputs at full resolution (the upsampling stage of the breakdown: the
+  // remaining work here is a few element-wise selections).
   DispMvsOutput out;
-  const auto finish = [&](const MaskedMap& full) {
-    return torch::where(Crop(full.valid, height, width), Crop(full.value, height, width),
-                        torch::zeros({}, opts));
-  };
-  if (keep_every_iteration) {
-    for (const auto& it : coarse.iterations) {
-      out.inv_depths.push_back(finish(
-          BilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor), kUpsampleFactor)));
+  {
+    const StageTimer::Section section(timer, NetStage::kUpsampling);
+    const auto finish = [&](const MaskedMap& full) {
+      return torch::where(Crop(full.valid, height, width), Crop(full.value, height, width),
+                          torch::zeros({}, opts));
+    };
+    if (keep_every_iteration) {
+      for (const auto& it : coarse.iterations) {
+        out.inv_depths.push_back(finish(
+            BilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor), kUpsampleFactor)));
+      }
+      for (size_t i = 0; i + 1 < fine.iterations.size(); ++i) {
+        const auto& it = fine.iterations[i];
+        out.inv_depths.push_back(finish(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor)));
+      }
     }
-    for (size_t i = 0; i + 1 < fine.iterations.size(); ++i) {
-      const auto& it = fine.iterations[i];
-      out.inv_depths.push_back(finish(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor)));
-    }
+    const auto& last = fine.iterations.back();
+    const MaskedMap final_map = ConvexUp(last.inv_depth, last.mask_logits, kUpsampleFactor);
+    out.valid = Crop(final_map.valid, height, width);
+    const torch::Tensor final_inv = finish(final_map);
+    out.inv_depths.push_back(final_inv);
+    out.depth = torch::where(out.valid, 1.0 / torch::where(out.valid, final_inv,
+                                                            torch::ones_like(final_inv)),
+                             torch::zeros_like(final_inv));
+    const MaskedMap confidence = ConvexUp(
+        MaskedMap{torch::where(last.inv_depth.valid, fine.agreement, torch::zeros_like(fine.agreement)),
+                  last.inv_depth.valid},
+        last.mask_logits, kUpsampleFactor);
+    out.confidence = torch::where(out.valid, Crop(confidence.value, height, width).clamp(0.0, 1.0),
+                                  torch::zeros_like(final_inv));
   }
-  const auto& last = fine.iterations.back();
-  const MaskedMap final_map = ConvexUp(last.inv_depth, last.mask_logits, kUpsampleFactor);
-  out.valid = Crop(final_map.valid, height, width);
-  const torch::Tensor final_inv = finish(final_map);
-  out.inv_depths.push_back(final_inv);
-  out.depth = torch::where(out.valid, 1.0 / torch::where(out.valid, final_inv,
-                                                          torch::ones_like(final_inv)),
-                           torch::zeros_like(final_inv));
-  const MaskedMap confidence = ConvexUp(
-      MaskedMap{torch::where(last.inv_depth.valid, fine.agreement, torch::zeros_like(fine.agreement)),
-                last.inv_depth.valid},
-      last.mask_logits, kUpsampleFactor);
-  out.confidence = torch::where(out.valid, Crop(confidence.value, height, width).clamp(0.0, 1.0),
-                                torch::zeros_like(final_inv));
   return out;
 }
 

@@ -24,6 +24,7 @@
 
 #include "model/config.h"
 #include "model/encoder.h"
+#include "model/stage_timer.h"
 #include "model/update_block.h"
 
 namespace dispmvs::model {
@@ -91,6 +92,10 @@ class DispMvsNetImpl : public torch::nn::Module {
 
   const ModelConfig& config() const { return config_; }
 
+  // Times the stages of every later forward pass into `timer` (not owned;
+  // null detaches). For benchmarks: see stage_timer.h.
+  void set_stage_timer(StageTimer* timer) { stage_timer_ = timer; }
+
  private:
   struct StageResult;
   struct StageInput;
@@ -101,6 +106,7 @@ class DispMvsNetImpl : public torch::nn::Module {
   ContextEncoder context_encoder_{nullptr};
   UpdateBlock coarse_block_{nullptr};
   UpdateBlock fine_block_{nullptr};
+  StageTimer* stage_timer_ = nullptr;
 };
 TORCH_MODULE(DispMvsNet);
 

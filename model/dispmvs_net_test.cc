@@ -1,6 +1,8 @@
 #include "model/dispmvs_net.h"
 
 #include <stdexcept>
+#include <chrono>
+#include <thread>
 #include <tuple>
 
 #include <ATen/CPUGeneratorImpl.h>
@@ -188,6 +190,75 @@ TEST(DispMvsNetTest, RejectsBadInput) {
     in.images = torch::rand({1, 2, 1, 32, 32});  // one channel
     EXPECT_THROW(net->forward(in), std::invalid_argument);
   }
+}
+
+
+// The stage breakdown of dispmvs_bench: attaching a timer changes nothing in
+// the output, and every stage is timed exactly as often as the network runs
+// it (so a stage that moved out of its section, or a section around the wrong
+// call, shows up as a count change).
+TEST(DispMvsNetStageTimerTest, TimesEveryStageWithoutChangingTheOutput) {
+  const ModelConfig config = FastConfig();
+  DispMvsNet net(config);
+  net->eval();
+  torch::NoGradGuard no_grad;
+  const DispMvsInput in = MakeInput(1, 2, 48, 64);
+  auto generator = [] { return at::make_generator<at::CPUGeneratorImpl>(5); };
+
+  const DispMvsOutput plain = net->forward(in, generator());
+  int synchronize_calls = 0;
+  StageTimer timer([&] { ++synchronize_calls; });
+  net->set_stage_timer(&timer);
+  const DispMvsOutput timed = net->forward(in, generator());
+  net->set_stage_timer(nullptr);
+  EXPECT_TRUE(torch::equal(plain.depth, timed.depth));
+  EXPECT_TRUE(torch::equal(plain.confidence, timed.confidence));
+
+  const long iterations = config.coarse_iterations + config.fine_iterations;
+  EXPECT_EQ(timer.count(NetStage::kEncoders), 2);  // matching + context
+  // One pyramid per stage, one lookup per iteration.
+  EXPECT_EQ(timer.count(NetStage::kCorrelation), 2 + iterations);
+  // One GRU step per iteration, one mask head per stage (eval mode).
+  EXPECT_EQ(timer.count(NetStage::kUpdate), iterations + 2);
+  // Coarse-to-fine initialisation, final outputs.
+  EXPECT_EQ(timer.count(NetStage::kUpsampling), 2);
+  // Relative poses and random start; per stage: epipolar pair, direction,
+  // base point; per iteration: E-flow, source pixel, triangulation, fusion.
+  EXPECT_EQ(timer.count(NetStage::kGeometry), 2 + 2 * 3 + 4 * iterations);
+  long sections = 0;
+  for (std::size_t s = 0; s < kNumNetStages; ++s) {
+    const auto stage = static_cast<NetStage>(s);
+    EXPECT_GT(timer.seconds(stage), 0.0) << NetStageName(stage);
+    sections += timer.count(stage);
+  }
+  EXPECT_EQ(synchronize_calls, 2 * sections);
+
+  // Detached: a further pass adds nothing.
+  const double before = timer.total_seconds();
+  net->forward(in, generator());
+  EXPECT_EQ(timer.total_seconds(), before);
+  timer.Reset();
+  EXPECT_EQ(timer.total_seconds(), 0.0);
+  EXPECT_EQ(timer.count(NetStage::kGeometry), 0);
+}
+
+TEST(StageTimerTest, SectionsAddUpAndNullTimerIsANoOp) {
+  StageTimer timer;
+  {
+    const StageTimer::Section section(&timer, NetStage::kUpdate);
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  {
+    const StageTimer::Section section(&timer, NetStage::kUpdate);
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  { const StageTimer::Section section(nullptr, NetStage::kEncoders); }
+  EXPECT_GE(timer.seconds(NetStage::kUpdate), 0.030);
+  EXPECT_LT(timer.seconds(NetStage::kUpdate), 5.0);
+  EXPECT_EQ(timer.count(NetStage::kUpdate), 2);
+  EXPECT_EQ(timer.count(NetStage::kEncoders), 0);
+  EXPECT_EQ(timer.total_seconds(), timer.seconds(NetStage::kUpdate));
+  EXPECT_STREQ(NetStageName(NetStage::kCorrelation), "correlation");
 }
 
 }  // namespace

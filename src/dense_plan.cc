@@ -121,6 +121,10 @@ void PlanOptions::Check() const {
   if (depth_min > 0 && depth_min >= depth_max) {
     throw std::invalid_argument("--depth_min must be smaller than --depth_max");
   }
+  RequireFinite(depth_range_widening, "depth_range_widening");
+  if (depth_range_widening < 1.0 || depth_range_widening > 1e6) {
+    throw std::invalid_argument("--depth_range_widening must be in [1, 1e6]");
+  }
   // The library structs check themselves too; this catches any drift between
   // the two sets of rules.
   ViewSelection().Check();
@@ -144,11 +148,20 @@ DepthRangeOptions PlanOptions::DepthRange() const {
 
 DepthRange DensePlan::HintFor(image_t image_id, bool* is_fallback) const {
   if (is_fallback != nullptr) *is_fallback = false;
-  if (user_depth_range) return *user_depth_range;
+  DepthRange hint = fallback_depth_range;
   const auto own = depth_ranges.find(image_id);
-  if (own != depth_ranges.end() && own->second.valid) return own->second;
-  if (is_fallback != nullptr) *is_fallback = true;
-  return fallback_depth_range;
+  if (user_depth_range) {
+    hint = *user_depth_range;
+  } else if (own != depth_ranges.end() && own->second.valid) {
+    hint = own->second;
+  } else if (is_fallback != nullptr) {
+    *is_fallback = true;
+  }
+  if (hint.valid && depth_range_widening != 1.0) {
+    hint.d_min /= depth_range_widening;
+    hint.d_max *= depth_range_widening;
+  }
+  return hint;
 }
 
 DensePlan PlanDenseReconstruction(const Workspace& workspace, const PlanOptions& options) {
@@ -170,6 +183,7 @@ DensePlan PlanDenseReconstruction(const Workspace& workspace, const PlanOptions&
     user.valid = true;
     plan.user_depth_range = user;
   }
+  plan.depth_range_widening = options.depth_range_widening;
   return plan;
 }
 

@@ -34,6 +34,10 @@ struct PlanOptions {
   // A user-given hint for every image instead (both or neither); <= 0 = unset.
   double depth_min = -1;
   double depth_max = -1;
+  // Widens every hint (the sparse points' or the user's) to [d_min / x,
+  // d_max * x], x >= 1: the depth-range robustness protocol (paper, Table 5;
+  // bench/depth_range_robustness.sh). 1 = as derived.
+  double depth_range_widening = 1;
 
   // Throws std::invalid_argument naming the command-line option at fault.
   void Check() const;
@@ -50,12 +54,14 @@ struct DensePlan {
   std::map<colmap_io::image_t, colmap_io::DepthRange> depth_ranges;  // every image
   colmap_io::DepthRange fallback_depth_range;
   std::optional<colmap_io::DepthRange> user_depth_range;  // --depth_min/--depth_max
+  double depth_range_widening = 1;  // applied by HintFor
   // Images of the model whose file is missing from WS/images (they are left
   // out of every source list; a reference among them fails alone).
   std::vector<colmap_io::image_t> missing_images;
 
   // The hint for `image_id`: the user's, else the image's own, else the
-  // fallback. `is_fallback` (optional) says whether the fallback was used.
+  // fallback, widened by depth_range_widening. `is_fallback` (optional) says
+  // whether the fallback was used.
   colmap_io::DepthRange HintFor(colmap_io::image_t image_id, bool* is_fallback = nullptr) const;
   const colmap_io::Image& ImageOf(colmap_io::image_t image_id) const {
     return model.images.at(image_id);

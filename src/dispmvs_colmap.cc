@@ -164,6 +164,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Depth-range hint for every image (with --depth_max) instead of the sparse points'.")
       ("depth_max", po::value<double>(&o.plan.depth_max)->default_value(-1),
        "See --depth_min.")
+      ("depth_range_widening", po::value<double>(&o.plan.depth_range_widening)
+           ->default_value(1),
+       "x >= 1: use [d_min / x, d_max * x] instead of every image's hint (a robustness test: "
+       "the network should not care; see bench/depth_range_robustness.sh).")
       ("depth_min_percentile", po::value<double>(&o.plan.depth_min_percentile)
            ->default_value(o.plan.depth_min_percentile, "0.01"),
        "Percentile (fraction) of an image's sparse depths taken as the low end of its hint.")

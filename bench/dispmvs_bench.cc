@@ -1,0 +1,530 @@
+// dispmvs_bench: time per view and peak memory of one DispMVS forward pass
+// (inference, no gradients), with the share of time per network stage.
+//
+//   dispmvs_bench [--sizes 640x512,1600x1152] [--sources 5] [--config small,paper]
+//                 [--coarse_iterations N] [--fine_iterations N] [--device cpu|cuda[:i]]
+//                 [--threads 1,2] [--warmup 1] [--reps 3]
+//
+// Random weights and images: the cost of a pass does not depend on their
+// values (the network has no data-dependent control flow). For every
+// configuration, size and thread count it runs --warmup passes, then --reps
+// plain passes (their median and minimum are the time per view), then --reps
+// passes with the stage timer attached (model/stage_timer.h) for the
+// breakdown. On CUDA the timed passes synchronise at every stage boundary, so
+// only their shares are reported, not their total.
+//
+// Peak memory: on the CPU, the largest growth of the resident set during a
+// pass (Linux VmHWM, reset before each pass through /proc/self/clear_refs;
+// without that, the peak since the process started), measured first, in a
+// forked child whose allocations of 128 KiB and more get their own mappings
+// (MapLargeAllocations), so that freed buffers leave the resident set and the
+// peak follows the live tensors rather than the allocator's history. On CUDA,
+// the caching allocator's peak of allocated bytes during a pass.
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <malloc.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <torch/cuda.h>
+#include <torch/torch.h>
+
+#ifdef DISPMVS_BENCH_CUDA_MEMORY
+#include <c10/cuda/CUDACachingAllocator.h>
+#include <c10/cuda/CUDAFunctions.h>
+#endif
+
+#include "model/config.h"
+#include "model/dispmvs_net.h"
+#include "model/stage_timer.h"
+
+namespace {
+
+using dispmvs::model::DispMvsInput;
+using dispmvs::model::DispMvsNet;
+using dispmvs::model::kNumNetStages;
+using dispmvs::model::ModelConfig;
+using dispmvs::model::NetStage;
+using dispmvs::model::NetStageName;
+using dispmvs::model::StageTimer;
+
+struct ImageSize {
+  int64_t width = 0;
+  int64_t height = 0;
+};
+
+struct Options {
+  std::vector<ImageSize> sizes{{640, 512}};
+  int64_t sources = 5;
+  std::vector<std::string> configs{"small"};
+  int64_t coarse_iterations = 0;  // 0: the configuration's own
+  int64_t fine_iterations = 0;
+  std::string device = "cpu";
+  std::vector<int64_t> threads{2};
+  int64_t warmup = 1;
+  int64_t reps = 3;
+};
+
+constexpr const char* kUsage =
+    "usage: dispmvs_bench [options]\n"
+    "Time per view and peak memory of the DispMVS network (random weights and images),\n"
+    "with the share of time per stage.\n"
+    "  --sizes WxH[,WxH...]     image sizes (default 640x512)\n"
+    "  --sources N              source views per reference (default 5)\n"
+    "  --config small,paper     network configurations (default small, the shipped one)\n"
+    "  --coarse_iterations N    override the configuration's GRU iterations (0: keep)\n"
+    "  --fine_iterations N      same for the fine stage\n"
+    "  --device cpu|cuda|cuda:I (default cpu)\n"
+    "  --threads T[,T...]       intra-op CPU threads (default 2)\n"
+    "  --warmup N               untimed passes first (default 1)\n"
+    "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n";
+
+std::vector<std::string> SplitComma(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream stream(s);
+  std::string item;
+  while (std::getline(stream, item, ',')) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+int64_t ParseInteger(const std::string& flag, const std::string& value, int64_t min, int64_t max) {
+  size_t used = 0;
+  int64_t v = 0;
+  try {
+    v = std::stoll(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (value.empty() || used != value.size() || v < min || v > max) {
+    throw std::invalid_argument(flag + " must be an integer in [" + std::to_string(min) + ", " +
+                                std::to_string(max) + "], got '" + value + "'");
+  }
+  return v;
+}
+
+ImageSize ParseSize(const std::string& text) {
+  const size_t x = text.find('x');
+  if (x == std::string::npos) {
+    throw std::invalid_argument("--sizes takes WIDTHxHEIGHT, e.g. 640x512, got '" + text + "'");
+  }
+  ImageSize size;
+  size.width = ParseInteger("--sizes width", text.substr(0, x), 16, 16384);
+  size.height = ParseInteger("--sizes height", text.substr(x + 1), 16, 16384);
+  return size;
+}
+
+Options ParseArgs(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string flag = argv[i];
+    if (flag == "--help" || flag == "-h") {
+      std::cout << kUsage;
+      std::exit(0);
+    }
+    if (i + 1 >= argc) throw std::invalid_argument("missing value after " + flag);
+    const std::string value = argv[++i];
+    if (flag == "--sizes") {
+      o.sizes.clear();
+      for (const auto& s : SplitComma(value)) o.sizes.push_back(ParseSize(s));
+    } else if (flag == "--sources") {
+      o.sources = ParseInteger(flag, value, 1, 64);
+    } else if (flag == "--config") {
+      o.configs = SplitComma(value);
+      for (const auto& c : o.configs) {
+        if (c != "paper" && c != "small") {
+          throw std::invalid_argument("--config takes paper and/or small, got '" + c + "'");
+        }
+      }
+    } else if (flag == "--coarse_iterations") {
+      o.coarse_iterations = ParseInteger(flag, value, 0, 1000);
+    } else if (flag == "--fine_iterations") {
+      o.fine_iterations = ParseInteger(flag, value, 0, 1000);
+    } else if (flag == "--device") {
+      o.device = value;
+    } else if (flag == "--threads") {
+      o.threads.clear();
+      for (const auto& t : SplitComma(value)) o.threads.push_back(ParseInteger(flag, t, 1, 1024));
+    } else if (flag == "--warmup") {
+      o.warmup = ParseInteger(flag, value, 0, 1000);
+    } else if (flag == "--reps") {
+      o.reps = ParseInteger(flag, value, 1, 1000);
+    } else {
+      throw std::invalid_argument("unknown option " + flag + " (see --help)");
+    }
+  }
+  if (o.sizes.empty() || o.threads.empty() || o.configs.empty()) {
+    throw std::invalid_argument("--sizes, --threads and --config need at least one value");
+  }
+  return o;
+}
+
+torch::Device ParseDevice(const std::string& name) {
+  std::optional<torch::Device> device;
+  try {
+    device = torch::Device(name);
+  } catch (const std::exception&) {
+  }
+  if (!device || (!device->is_cpu() && !device->is_cuda())) {
+    throw std::invalid_argument("--device must be cpu, cuda or cuda:I, got '" + name + "'");
+  }
+  if (device->is_cuda() && !torch::cuda::is_available()) {
+    throw std::invalid_argument("--device " + name +
+                                ": this LibTorch has no usable CUDA device (build against a "
+                                "CUDA LibTorch on a GPU machine)");
+  }
+  return *device;
+}
+
+// A plausible rig: reference at the origin, sources on a line, scene 2-6
+// units away.
+DispMvsInput MakeInput(const ImageSize& size, int64_t sources, const torch::Device& device) {
+  const int64_t views = sources + 1;
+  DispMvsInput in;
+  in.images = torch::rand({1, views, 3, size.height, size.width});
+  torch::Tensor K = torch::eye(3);
+  K[0][0] = 0.9 * static_cast<double>(size.width);
+  K[1][1] = 0.9 * static_cast<double>(size.width);
+  K[0][2] = (static_cast<double>(size.width) - 1) / 2;
+  K[1][2] = (static_cast<double>(size.height) - 1) / 2;
+  in.intrinsics = K.expand({1, views, 3, 3}).clone();
+  in.extrinsics = torch::eye(4).expand({1, views, 4, 4}).clone();
+  for (int64_t v = 1; v < views; ++v) {
+    in.extrinsics[0][v][0][3] = 0.2 * static_cast<double>(v - views / 2 - 1);
+    in.extrinsics[0][v][1][3] = 0.05 * static_cast<double>(v);
+  }
+  in.depth_min = torch::full({1}, 2.0f);
+  in.depth_max = torch::full({1}, 6.0f);
+  in.images = in.images.to(device);
+  in.intrinsics = in.intrinsics.to(device);
+  in.extrinsics = in.extrinsics.to(device);
+  in.depth_min = in.depth_min.to(device);
+  in.depth_max = in.depth_max.to(device);
+  return in;
+}
+
+double Median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  const size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// Peak memory of one pass, in bytes, and how it was measured.
+class PeakMemoryProbe {
+ public:
+  explicit PeakMemoryProbe(const torch::Device& device) : device_(device) {
+    if (device_.is_cpu()) {
+      can_reset_ = ResetPeakRss();
+    }
+  }
+
+  const char* method() const {
+    if (device_.is_cuda()) {
+#ifdef DISPMVS_BENCH_CUDA_MEMORY
+      return "CUDA allocator peak";
+#else
+      return "not measured (built without c10_cuda)";
+#endif
+    }
+    return can_reset_ ? "peak RSS growth" : "process peak RSS (clear_refs unavailable)";
+  }
+
+  void Start() {
+    if (device_.is_cpu()) {
+      if (can_reset_) ResetPeakRss();
+      baseline_ = can_reset_ ? ReadStatusKb("VmRSS:") * 1024 : 0;
+      return;
+    }
+#ifdef DISPMVS_BENCH_CUDA_MEMORY
+    const auto index = device_.index() < 0 ? c10::cuda::current_device() : device_.index();
+    c10::cuda::CUDACachingAllocator::resetPeakStats(index);
+    // [0] is the aggregate over pool types in every LibTorch version.
+    baseline_ = c10::cuda::CUDACachingAllocator::getDeviceStats(index).allocated_bytes[0].current;
+#endif
+  }
+
+  // Bytes above the state at Start(); -1 when not measured.
+  int64_t Stop() const {
+    if (device_.is_cpu()) return ReadStatusKb("VmHWM:") * 1024 - baseline_;
+#ifdef DISPMVS_BENCH_CUDA_MEMORY
+    const auto index = device_.index() < 0 ? c10::cuda::current_device() : device_.index();
+    return c10::cuda::CUDACachingAllocator::getDeviceStats(index).allocated_bytes[0].peak -
+           baseline_;
+#else
+    return -1;
+#endif
+  }
+
+ private:
+  // Writing 5 to clear_refs resets VmHWM to the current RSS (Linux >= 4.0).
+  static bool ResetPeakRss() {
+    std::ofstream clear("/proc/self/clear_refs");
+    clear << "5";
+    clear.flush();
+    return static_cast<bool>(clear);
+  }
+
+  static int64_t ReadStatusKb(const std::string& key) {
+    std::ifstream status("/proc/self/status");
+    std::string line;
+    while (std::getline(status, line)) {
+      if (line.compare(0, key.size(), key) == 0) return std::stoll(line.substr(key.size()));
+    }
+    return 0;
+  }
+
+  torch::Device device_;
+  bool can_reset_ = false;
+  int64_t baseline_ = 0;
+};
+
+// glibc keeps freed heap memory resident and raises its mmap threshold
+// after large frees, so the resident set would only ever grow and a later
+// configuration would look free. A fixed threshold makes every buffer above
+// it its own mapping, returned to the system when freed: the resident set
+// then follows the live tensors, and its peak growth is the pass's peak.
+// (LibTorch's own CPU buffers of a pass are mostly above 128 KiB anyway.)
+void MapLargeAllocations() { mallopt(M_MMAP_THRESHOLD, 128 * 1024); }
+
+struct Measurement {
+  std::vector<double> seconds;
+  int64_t peak_bytes = -1;
+  std::vector<double> stage_share;  // per NetStage, of the timed passes' wall time
+  double other_share = 0;
+};
+
+// The time per view and the stage breakdown, with the allocator as users
+// run it.
+Measurement MeasureTime(DispMvsNet& net, const DispMvsInput& input, const Options& o,
+                        const torch::Device& device) {
+  const auto synchronize = [&] {
+    if (device.is_cuda()) torch::cuda::synchronize(device.index() < 0 ? -1 : device.index());
+  };
+  const auto pass = [&] {
+    synchronize();
+    const auto start = std::chrono::steady_clock::now();
+    net->forward(input);
+    synchronize();
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  for (int64_t i = 0; i < o.warmup; ++i) pass();
+
+  Measurement m;
+  for (int64_t i = 0; i < o.reps; ++i) m.seconds.push_back(pass());
+
+  StageTimer timer(device.is_cuda() ? std::function<void()>(synchronize) : nullptr);
+  net->set_stage_timer(&timer);
+  double timed_total = 0;
+  for (int64_t i = 0; i < o.reps; ++i) timed_total += pass();
+  net->set_stage_timer(nullptr);
+  for (size_t s = 0; s < kNumNetStages; ++s) {
+    m.stage_share.push_back(timer.seconds(static_cast<NetStage>(s)) / timed_total);
+  }
+  m.other_share = std::max(0.0, 1.0 - timer.total_seconds() / timed_total);
+  return m;
+}
+
+// Peak memory of a pass: one pass to settle one-time allocations, then the
+// largest peak of two.
+int64_t MeasurePeakMemory(DispMvsNet& net, const DispMvsInput& input, const torch::Device& device) {
+  net->forward(input);
+  PeakMemoryProbe memory(device);
+  int64_t peak = -1;
+  for (int i = 0; i < 2; ++i) {
+    memory.Start();
+    net->forward(input);
+    if (device.is_cuda()) torch::cuda::synchronize(device.index() < 0 ? -1 : device.index());
+    peak = std::max(peak, memory.Stop());
+  }
+  return peak;
+}
+
+// Runs `measure` in a forked child (before this process has started any
+// LibTorch thread pool, so forking is safe) and returns what it returned;
+// -1 per row where the child failed. The parent waits, so the two never
+// compete for the cores.
+template <typename Fn>
+std::vector<int64_t> MeasureCpuMemoryInChild(Fn measure) {
+  int fds[2];
+  if (pipe(fds) != 0) return {};
+  const pid_t pid = fork();
+  if (pid < 0) {
+    close(fds[0]);
+    close(fds[1]);
+    return {};
+  }
+  if (pid == 0) {
+    close(fds[0]);
+    int status = 0;
+    try {
+      std::string text;
+      for (const int64_t peak : measure()) text += std::to_string(peak) + "\n";
+      if (write(fds[1], text.data(), text.size()) != static_cast<ssize_t>(text.size())) status = 1;
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "dispmvs_bench: memory measurement failed: %s\n", e.what());
+      status = 1;
+    }
+    close(fds[1]);
+    std::fflush(stderr);
+    _exit(status);
+  }
+  close(fds[1]);
+  std::string text;
+  char buffer[4096];
+  ssize_t got = 0;
+  while ((got = read(fds[0], buffer, sizeof buffer)) > 0) text.append(buffer, static_cast<size_t>(got));
+  close(fds[0]);
+  int status = 0;
+  waitpid(pid, &status, 0);
+  std::vector<int64_t> peaks;
+  if (WIFEXITED(status) && WEXITSTATUS(status) == 0) {
+    std::istringstream lines(text);
+    int64_t peak = 0;
+    while (lines >> peak) peaks.push_back(peak);
+  }
+  return peaks;
+}
+
+struct Row {
+  std::string config;
+  int64_t params = 0;
+  int64_t coarse_iterations = 0, fine_iterations = 0;
+  ImageSize size;
+  int64_t threads = 0;
+  Measurement m;
+};
+
+ModelConfig MakeConfig(const std::string& name, const Options& o) {
+  ModelConfig config = name == "paper" ? ModelConfig::Paper() : ModelConfig::Small();
+  if (o.coarse_iterations > 0) config.coarse_iterations = o.coarse_iterations;
+  if (o.fine_iterations > 0) config.fine_iterations = o.fine_iterations;
+  return config;
+}
+
+int64_t CountParameters(DispMvsNet& net) {
+  int64_t count = 0;
+  for (const auto& p : net->parameters()) count += p.numel();
+  return count;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    const Options o = ParseArgs(argc, argv);
+    const torch::Device device = ParseDevice(o.device);
+    torch::manual_seed(0);
+    torch::NoGradGuard no_grad;
+    std::vector<int64_t> thread_counts = o.threads;
+    if (device.is_cuda()) thread_counts.resize(1);  // they do not matter there
+
+    // A row per configuration x size x thread count, in this order.
+    std::vector<Row> rows;
+    for (const std::string& name : o.configs) {
+      const ModelConfig config = MakeConfig(name, o);
+      for (const ImageSize& size : o.sizes) {
+        for (const int64_t threads : thread_counts) {
+          Row r;
+          r.config = name;
+          r.coarse_iterations = config.coarse_iterations;
+          r.fine_iterations = config.fine_iterations;
+          r.size = size;
+          r.threads = threads;
+          rows.push_back(r);
+        }
+      }
+    }
+    // Runs `measure(net, input, row)` for every row, building each network
+    // once.
+    const auto for_each_row = [&](const char* what, const auto& measure) {
+      size_t index = 0;
+      for (const std::string& name : o.configs) {
+        DispMvsNet net(MakeConfig(name, o));
+        net->eval();
+        net->to(device);
+        for (const ImageSize& size : o.sizes) {
+          const DispMvsInput input = MakeInput(size, o.sources, device);
+          for (const int64_t threads : thread_counts) {
+            Row& row = rows.at(index++);
+            torch::set_num_threads(static_cast<int>(threads));
+            std::fprintf(stderr, "dispmvs_bench: %s %s, %lldx%lld, %lld threads\n", what,
+                         name.c_str(), static_cast<long long>(size.width),
+                         static_cast<long long>(size.height), static_cast<long long>(threads));
+            row.params = CountParameters(net);
+            measure(net, input, row);
+          }
+        }
+      }
+    };
+
+    // Memory first: on the CPU in a child process that maps large
+    // allocations separately (MapLargeAllocations), which slows passes down
+    // and would outlast any later timing; the child reports its peaks through
+    // a pipe and exits before the timings start.
+    const auto measure_memory = [&](DispMvsNet& net, const DispMvsInput& input, Row& row) {
+      row.m.peak_bytes = MeasurePeakMemory(net, input, device);
+    };
+    if (device.is_cpu()) {
+      const std::vector<int64_t> peaks = MeasureCpuMemoryInChild([&] {
+        MapLargeAllocations();
+        for_each_row("memory of", measure_memory);
+        std::vector<int64_t> out;
+        for (const Row& r : rows) out.push_back(r.m.peak_bytes);
+        return out;
+      });
+      for (size_t i = 0; i < rows.size() && i < peaks.size(); ++i) rows[i].m.peak_bytes = peaks[i];
+    } else {
+      for_each_row("memory of", measure_memory);
+    }
+    for_each_row("timing", [&](DispMvsNet& net, const DispMvsInput& input, Row& row) {
+      const int64_t peak = row.m.peak_bytes;
+      row.m = MeasureTime(net, input, o, device);
+      row.m.peak_bytes = peak;
+    });
+
+    std::printf("DispMVS forward pass (inference) on %s, N = %lld sources, %lld warm-up, "
+                "%lld timed + %lld profiled passes; LibTorch %s\n",
+                device.str().c_str(), static_cast<long long>(o.sources),
+                static_cast<long long>(o.warmup), static_cast<long long>(o.reps),
+                static_cast<long long>(o.reps), TORCH_VERSION);
+    std::printf("peak memory: %s\n\n", PeakMemoryProbe(device).method());
+    std::printf("| config | params | iters | size | threads | median s | min s | peak MiB |");
+    for (size_t s = 0; s < kNumNetStages; ++s) {
+      std::printf(" %s |", NetStageName(static_cast<NetStage>(s)));
+    }
+    std::printf(" other |\n|---|---|---|---|---|---|---|---|");
+    for (size_t s = 0; s <= kNumNetStages; ++s) std::printf("---|");
+    std::printf("\n");
+    for (const Row& r : rows) {
+      std::printf("| %s | %.2fM | %lld+%lld | %lldx%lld | %lld | %.3f | %.3f | ", r.config.c_str(),
+                  static_cast<double>(r.params) / 1e6, static_cast<long long>(r.coarse_iterations),
+                  static_cast<long long>(r.fine_iterations), static_cast<long long>(r.size.width),
+                  static_cast<long long>(r.size.height), static_cast<long long>(r.threads),
+                  Median(r.m.seconds), *std::min_element(r.m.seconds.begin(), r.m.seconds.end()));
+      if (r.m.peak_bytes >= 0) {
+        std::printf("%.0f |", static_cast<double>(r.m.peak_bytes) / (1024.0 * 1024.0));
+      } else {
+        std::printf("n/a |");
+      }
+      for (const double share : r.m.stage_share) std::printf(" %.1f%% |", 100.0 * share);
+      std::printf(" %.1f%% |\n", 100.0 * r.m.other_share);
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "dispmvs_bench: %s\n", e.what());
+    return 1;
+  }
+}
