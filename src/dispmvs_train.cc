@@ -42,6 +42,9 @@ options (default):
                               images/, cams/*_cam.txt, pair.txt, depths/*.pfm; one scan or a
                               folder of scans); validation stays on generated scenes (none)
   --mvsnet_fraction F         share of samples drawn from that data set, the rest generated (1)
+  --init_weights FILE         start from these weights (e.g. models/dispmvs_small.safetensors,
+                              to fine-tune at a larger size) instead of a random initialisation;
+                              the file must fit --config (none)
   --seed S                    run seed (0)
   --device cpu|cuda|cuda:I    (cpu)
   --threads T                 intra-op threads, 0 = one per core (0)
@@ -126,6 +129,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--train_widening_max") o.train_widening_max = ParseDouble(flag, value);
     else if (flag == "--mvsnet_root") o.mvsnet_root = value;
     else if (flag == "--mvsnet_fraction") o.mvsnet_fraction = ParseDouble(flag, value);
+    else if (flag == "--init_weights") o.init_weights = value;
     else if (flag == "--seed") o.seed = ParseUnsigned(flag, value);
     else if (flag == "--device") o.device = value;
     else if (flag == "--threads") o.threads = ParseInt(flag, value);

@@ -209,6 +209,28 @@ std::string MvsnetRootSetting(const std::string& root) {
   return (error ? fs::absolute(root).lexically_normal() : canonical).string();
 }
 
+// A weights file as a run setting: its size and a 64-bit FNV-1a hash of its
+// bytes, so that the same weights under another path resume, and other
+// weights under the same path do not.
+std::string InitWeightsSetting(const std::string& path) {
+  if (path.empty()) return "";
+  std::ifstream file(path, std::ios::binary);
+  if (!file) throw std::invalid_argument("init_weights: cannot read " + path);
+  uint64_t hash = 14695981039346656037ull;
+  uint64_t size = 0;
+  char buffer[1 << 16];
+  while (file.read(buffer, sizeof buffer) || file.gcount() > 0) {
+    for (std::streamsize i = 0; i < file.gcount(); ++i) {
+      hash = (hash ^ static_cast<unsigned char>(buffer[i])) * 1099511628211ull;
+    }
+    size += static_cast<uint64_t>(file.gcount());
+  }
+  char text[64];
+  std::snprintf(text, sizeof text, "%llu bytes, fnv1a64 %016llx",
+                static_cast<unsigned long long>(size), static_cast<unsigned long long>(hash));
+  return text;
+}
+
 // The settings that change what a step computes: a checkpoint can only be
 // resumed by a run with the same ones (the total step count may differ).
 std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
@@ -233,7 +255,8 @@ std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
           {"grad_clip", clip.str()},
           {"train_widening_max", widening.str()},
           {"mvsnet_root", MvsnetRootSetting(o.mvsnet_root)},
-          {"mvsnet_fraction", mvsnet_fraction.str()}};
+          {"mvsnet_fraction", mvsnet_fraction.str()},
+          {"init_weights", InitWeightsSetting(o.init_weights)}};
 }
 
 // Settings added after checkpoints were first written, with the value that a
@@ -242,6 +265,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "mvsnet_root") return "";
   if (key == "mvsnet_fraction") return "1";
   if (key == "train_widening_max") return "1";
+  if (key == "init_weights") return "";
   return std::nullopt;
 }
 
@@ -381,6 +405,9 @@ void TrainOptions::Check(bool for_training) const {
   }
   // A fraction of a data set that is not there is a mistake, not a request.
   if (mvsnet_root.empty() && mvsnet_fraction != 1) fail("mvsnet_fraction needs mvsnet_root");
+  if (!init_weights.empty() && !fs::is_regular_file(init_weights)) {
+    fail("init_weights: no such file " + init_weights);
+  }
   SynthConfigFor(*this);  // the generator's own limits
 }
 
@@ -431,6 +458,11 @@ void Train(const TrainOptions& options, std::ostream& console) {
     start = checkpoints.back();
     LoadCheckpoint(dir, start, net, optimizer, options, device);
     log.Line("resumed from " + WeightsPath(dir, start).string() + " at step " + std::to_string(start));
+  } else if (!options.init_weights.empty()) {
+    // Checked before anything is trained: a mismatch names the tensor.
+    model::LoadModuleWeights(*net, options.init_weights);
+    log.Line("initialised from " + options.init_weights + " (" +
+             InitWeightsSetting(options.init_weights) + ")");
   }
 
   const auto synth_config = SynthConfigFor(options);

@@ -55,6 +55,11 @@ struct TrainOptions {
   // stays on generated scenes, so its numbers stay comparable across runs.
   std::string mvsnet_root;
   double mvsnet_fraction = 1.0;  // in [0, 1]; must stay 1 without mvsnet_root
+  // Weights to start from instead of the random initialisation (fine-tuning,
+  // e.g. at a larger size from the shipped model); empty = random. The file's
+  // tensors must fit `config`. A run setting, identified by the file's
+  // content (not its path); a resumed run takes the checkpoint's weights.
+  std::string init_weights;
   uint64_t seed = 0;
   std::string device = "cpu";  // "cpu", "cuda" or "cuda:<i>"
   int64_t threads = 0;         // intra-op threads; 0 = one per core

@@ -2,12 +2,15 @@
 
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <set>
 #include <sstream>
 #include <string>
 
 #include <gtest/gtest.h>
 
+#include "model/config.h"
+#include "model/dispmvs_net.h"
 #include "model/safetensors.h"
 #include "tests/support/temp_dir.h"
 
@@ -230,6 +233,79 @@ TEST(TrainerTest, WideningChangesTrainingAndIsARunSetting) {
   } catch (const std::runtime_error& e) {
     EXPECT_NE(std::string(e.what()).find("different run (train_widening_max"), std::string::npos) << e.what();
   }
+}
+
+// Largest absolute difference between the same-named tensors of two weights
+// files (which must hold the same names).
+double MaxWeightDifference(const fs::path& a, const fs::path& b) {
+  const model::SafetensorsFile fa = model::LoadSafetensors(a.string());
+  const model::SafetensorsFile fb = model::LoadSafetensors(b.string());
+  std::map<std::string, torch::Tensor> by_name(fb.tensors.begin(), fb.tensors.end());
+  double worst = 0;
+  for (const auto& [name, tensor] : fa.tensors) {
+    const auto other = by_name.find(name);
+    if (other == by_name.end()) return INFINITY;
+    worst = std::max(worst, (tensor - other->second).abs().max().item<double>());
+  }
+  return worst;
+}
+
+// --init_weights: a run starts from the given weights (one step at a tiny
+// learning rate stays next to them, far from a random start), the weights
+// are a run setting, and a missing or unfitting file is refused up front.
+TEST(TrainerTest, InitWeightsStartFromTheFileAndAreARunSetting) {
+  TempDir tmp;
+  auto source = TinyOptions(tmp.path() / "source", 2);
+  source.seed = 5;  // another random start than the runs below (seed 0)
+  RunAndReadWeights(source);
+  const fs::path source_weights = tmp.path() / "source" / "model.safetensors";
+
+  auto tuned = TinyOptions(tmp.path() / "tuned", 1);
+  tuned.lr = 1e-9;
+  tuned.init_weights = source_weights.string();
+  std::ostringstream log;
+  Train(tuned, log);
+  EXPECT_NE(log.str().find("initialised from " + source_weights.string()), std::string::npos)
+      << log.str();
+  auto fresh = TinyOptions(tmp.path() / "fresh", 1);
+  fresh.lr = 1e-9;
+  RunAndReadWeights(fresh);
+  EXPECT_LT(MaxWeightDifference(tmp.path() / "tuned" / "model.safetensors", source_weights), 1e-6);
+  EXPECT_GT(MaxWeightDifference(tmp.path() / "fresh" / "model.safetensors", source_weights), 1e-3);
+
+  // Same bytes under another path resume; other weights do not.
+  const fs::path copy = tmp.path() / "copy.safetensors";
+  fs::copy_file(source_weights, copy);
+  tuned.init_weights = copy.string();
+  tuned.steps = 2;
+  Train(tuned, log);
+  tuned.init_weights = (tmp.path() / "fresh" / "model.safetensors").string();
+  tuned.steps = 3;
+  try {
+    Train(tuned, log);
+    FAIL() << "expected a refusal";
+  } catch (const std::runtime_error& e) {
+    EXPECT_NE(std::string(e.what()).find("different run (init_weights"), std::string::npos) << e.what();
+  }
+
+  auto missing = TinyOptions(tmp.path() / "missing", 1);
+  missing.init_weights = (tmp.path() / "nothing.safetensors").string();
+  try {
+    Train(missing, log);
+    FAIL() << "expected a refusal";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("init_weights: no such file"), std::string::npos) << e.what();
+  }
+  // Paper-size weights do not fit the small network: refused before step 1.
+  const fs::path paper_weights = tmp.path() / "paper.safetensors";
+  model::DispMvsNet paper(model::ModelConfig::Paper());
+  model::SaveModuleWeights(*paper, model::ModelConfig::Paper(), paper_weights.string());
+  auto unfitting = TinyOptions(tmp.path() / "unfitting", 1);
+  unfitting.init_weights = paper_weights.string();
+  std::ostringstream unfitting_log;
+  EXPECT_ANY_THROW(Train(unfitting, unfitting_log));
+  EXPECT_EQ(unfitting_log.str().find("step 1/1"), std::string::npos) << unfitting_log.str();
+  EXPECT_FALSE(fs::exists(tmp.path() / "unfitting" / "model.safetensors"));
 }
 
 }  // namespace
