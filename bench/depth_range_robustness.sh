@@ -114,7 +114,7 @@ done
                       rel[$2] += $9; if (!($2 in seen)) { seen[$2] = 1; order[n++] = $2 } }
       END { for (i = 0; i < n; ++i) { t = order[i];
               printf "| %s | %s | %.4f | %s | %.4f | %.4f | %.4f |\n", x, t, pred[t] / gt[t],
-                     pred[t] > 0 ? sprintf("%.4f", rel[t] / pred[t]) : "n/a",
+                     (pred[t] > 0 ? sprintf("%.4f", rel[t] / pred[t]) : "n/a"),
                      w1[t] / gt[t], w2[t] / gt[t], w5[t] / gt[t] } }'
   done
   echo
