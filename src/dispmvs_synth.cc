@@ -14,10 +14,12 @@
 #include <cstdint>
 #include <exception>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
 
+#include "synth/photo_folder.h"
 #include "synth/workspace_writer.h"
 
 namespace {
@@ -33,6 +35,7 @@ struct Options {
   int num_scenes = 0;
   uint64_t seed = 0;
   std::string rig = "random";
+  std::string texture_dir;
   dispmvs::synth::SynthWorkspaceOptions workspace;
 };
 
@@ -60,6 +63,11 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        po::value<int>(&options.workspace.sparse_points_per_view)
            ->default_value(options.workspace.sparse_points_per_view),
        "Sparse points drawn per view (before the two-view visibility test).")
+      ("texture_dir", po::value<std::string>(&options.texture_dir),
+       "Folder of photographs (png, jpg, ...) used as textures besides the procedural ones, "
+       "e.g. /usr/share/backgrounds/gnome from Debian's gnome-backgrounds.")
+      ("photo_probability", po::value<double>(&config.photo_probability)->default_value(config.photo_probability, "0.5"),
+       "With --texture_dir: the share of textures that are photos.")
       ("ply_stride", po::value<int>(&options.workspace.ply_stride)->default_value(options.workspace.ply_stride),
        "ground_truth/points.ply keeps every n-th depth sample per row and column.");
 
@@ -74,6 +82,11 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   if (values.count("num_scenes") == 0) throw std::invalid_argument("--num_scenes is required (see --help)");
   if (options.num_scenes < 1) throw std::invalid_argument("--num_scenes must be >= 1");
   config = dispmvs::synth::ConfigForRig(options.rig, config);
+  if (!options.texture_dir.empty()) {
+    config.photos = std::make_shared<const dispmvs::synth::PhotoSet>(
+        dispmvs::synth::LoadPhotoFolder(options.texture_dir, {}, &std::cerr));
+    std::cout << config.photos->size() << " photos from " << options.texture_dir << '\n';
+  }
   options.workspace.Check();
   return options;
 }

@@ -42,6 +42,10 @@ options (default):
                               images/, cams/*_cam.txt, pair.txt, depths/*.pfm; one scan or a
                               folder of scans); validation stays on generated scenes (none)
   --mvsnet_fraction F         share of samples drawn from that data set, the rest generated (1)
+  --texture_dir DIR           photographs for photo textures of the training scenes (png, jpg, ...;
+                              e.g. apt-get install gnome-backgrounds: /usr/share/backgrounds/gnome);
+                              validation stays procedural (none)
+  --photo_probability P       share of textures that are photos, with --texture_dir (0.5)
   --init_weights FILE         start from these weights (e.g. models/dispmvs_small.safetensors,
                               to fine-tune at a larger size) instead of a random initialisation;
                               the file must fit --config (none)
@@ -130,6 +134,8 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--mvsnet_root") o.mvsnet_root = value;
     else if (flag == "--mvsnet_fraction") o.mvsnet_fraction = ParseDouble(flag, value);
     else if (flag == "--init_weights") o.init_weights = value;
+    else if (flag == "--texture_dir") o.texture_dir = value;
+    else if (flag == "--photo_probability") o.photo_probability = ParseDouble(flag, value);
     else if (flag == "--seed") o.seed = ParseUnsigned(flag, value);
     else if (flag == "--device") o.device = value;
     else if (flag == "--threads") o.threads = ParseInt(flag, value);

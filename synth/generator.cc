@@ -76,6 +76,8 @@ void SynthConfig::Check() const {
     fail("photometry ranges out of bounds");
   }
   if (dtype != torch::kFloat && dtype != torch::kDouble) fail("dtype must be float32 or float64");
+  if (!(photo_probability >= 0 && photo_probability <= 1)) fail("photo_probability must be in [0, 1]");
+  if (photos) CheckPhotoSet(*photos);
   if (march_steps < 1 || march_steps > 256 || bisection_steps < 0 || bisection_steps > 64) {
     fail("march_steps must be in [1, 256] and bisection_steps in [0, 64]");
   }
@@ -94,7 +96,10 @@ SynthScene DrawScene(const SynthConfig& config, uint64_t seed) {
   intrinsics.width = config.width;
   const Rig rig = MakeRig(out.rig, config.num_views, intrinsics, rig_rng);
   const int objects = static_cast<int>(scene_rng.Int(config.min_objects, config.max_objects));
-  out.scene = BuildScene(rig, objects, config.height, config.width, scene_rng);
+  PhotoTextureChoice photos;
+  photos.num_photos = config.photos ? static_cast<int>(config.photos->size()) : 0;
+  photos.photo_probability = config.photo_probability;
+  out.scene = BuildScene(rig, objects, config.height, config.width, scene_rng, photos);
   out.cameras = rig.cameras;
   for (int v = 0; v < config.num_views; ++v) out.photometry.push_back(RandomPhotometry(config.photometry, photometry_rng));
   out.scale = scale_rng.LogUniform(config.scale_min, config.scale_max);
@@ -128,7 +133,8 @@ SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::
     const torch::Tensor flat_primitive = hits.primitive.reshape({-1});
     const torch::Tensor texture = texture_of_primitive.index_select(
         0, torch::where(flat_primitive >= 0, flat_primitive, texture_of_primitive.size(0) - 1));
-    const torch::Tensor albedo = EvaluateAlbedo(s.scene.textures, texture, hits.uv.reshape({-1, 2}), s.scene.empty_color)
+    const torch::Tensor albedo = EvaluateAlbedo(s.scene.textures, texture, hits.uv.reshape({-1, 2}), s.scene.empty_color,
+                                                    config.photos.get())
                                      .t()
                                      .reshape({3, config.height, config.width});
     const torch::Tensor radiance = ShadeLambertian(albedo, hits.normal, s.scene.light_direction, s.scene.ambient);

@@ -18,6 +18,7 @@
 #include <torch/torch.h>
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -25,6 +26,7 @@
 #include "synth/rigs.h"
 #include "synth/scene.h"
 #include "synth/shading.h"
+#include "synth/texture.h"
 
 namespace dispmvs::synth {
 
@@ -39,6 +41,11 @@ struct SynthConfig {
   PhotometryRanges photometry;
   torch::ScalarType dtype = torch::kFloat;  // of images, depths and camera tensors
   int march_steps = 32, bisection_steps = 12;  // height-field ray marching (see raycast.h)
+  // Photographs for photo textures (texture.h), shared, not copied; each
+  // texture is one with photo_probability. Null or empty: procedural only,
+  // and the scenes are exactly those of a configuration without photos.
+  std::shared_ptr<const PhotoSet> photos;
+  double photo_probability = 0.5;
 
   // Throws std::invalid_argument on sizes, counts or ranges that make no sense.
   void Check() const;

@@ -68,9 +68,18 @@ void Shrink(Primitive& p, double factor) {
   p.center = center;
 }
 
+TextureSpec DrawTexture(Rng& rng, const PhotoTextureChoice& photos) {
+  if (photos.num_photos > 0 && photos.photo_probability > 0 &&
+      rng.Uniform(0, 1) < photos.photo_probability) {
+    return RandomPhotoTexture(rng, photos.num_photos);
+  }
+  return RandomTexture(rng);
+}
+
 }  // namespace
 
-Scene BuildScene(const Rig& rig, int num_objects, int64_t height, int64_t width, Rng& rng) {
+Scene BuildScene(const Rig& rig, int num_objects, int64_t height, int64_t width, Rng& rng,
+                 const PhotoTextureChoice& photos) {
   if (rig.cameras.empty()) throw std::invalid_argument("BuildScene: the rig has no cameras");
   if (num_objects < 0) throw std::invalid_argument("BuildScene: negative object count");
   Scene scene;
@@ -82,7 +91,7 @@ Scene BuildScene(const Rig& rig, int num_objects, int64_t height, int64_t width,
 
   for (Primitive p : rig.environment) {
     p.texture = static_cast<int>(scene.textures.size());
-    scene.textures.push_back(RandomTexture(rng));
+    scene.textures.push_back(DrawTexture(rng, photos));
     scene.primitives.push_back(p);
   }
 
@@ -103,7 +112,7 @@ Scene BuildScene(const Rig& rig, int num_objects, int64_t height, int64_t width,
       if (radius > limit) Shrink(p, limit / radius);
     }
     p.texture = static_cast<int>(scene.textures.size());
-    scene.textures.push_back(RandomTexture(rng));
+    scene.textures.push_back(DrawTexture(rng, photos));
     scene.primitives.push_back(p);
   }
   scene.Check();

@@ -17,6 +17,15 @@ namespace dispmvs::synth {
 
 class Rng;
 
-Scene BuildScene(const Rig& rig, int num_objects, int64_t height, int64_t width, Rng& rng);
+// With num_photos > 0 and photo_probability > 0, each texture is a photo
+// texture (RandomPhotoTexture) with that probability; otherwise no extra
+// random numbers are drawn, so scenes stay those of a build without photos.
+struct PhotoTextureChoice {
+  int num_photos = 0;
+  double photo_probability = 0;
+};
+
+Scene BuildScene(const Rig& rig, int num_objects, int64_t height, int64_t width, Rng& rng,
+                 const PhotoTextureChoice& photos = {});
 
 }  // namespace dispmvs::synth

@@ -85,6 +85,32 @@ torch::Tensor PatternValue(const TextureSpec& spec, const torch::Tensor& u, cons
   throw std::logic_error("PatternValue: unknown pattern");
 }
 
+// Mirrored repeat of t onto [0, 1]: 1 - |(t mod 2) - 1|.
+torch::Tensor MirroredRepeat(const torch::Tensor& t) {
+  return 1.0 - (torch::remainder(t, 2.0) - 1.0).abs();
+}
+
+// The base colour [n,3] of a photo texture at (u, v) (see texture.h).
+torch::Tensor PhotoColor(const TextureSpec& spec, const torch::Tensor& photo, const torch::Tensor& u,
+                         const torch::Tensor& v) {
+  const double c = std::cos(spec.angle), s = std::sin(spec.angle);
+  const torch::Tensor ru = (u * c + v * s) * spec.frequency;
+  const torch::Tensor rv = (v * c - u * s) * spec.frequency;
+  const double height = static_cast<double>(photo.size(1));
+  const double width = static_cast<double>(photo.size(2));
+  // grid_sample with align_corners=true: -1 and 1 are the centres of the
+  // first and last pixels, i.e. pixel x = (g + 1) / 2 * (W - 1).
+  const torch::Tensor gx = MirroredRepeat(ru) * 2.0 - 1.0;
+  const torch::Tensor gy = MirroredRepeat(rv * (width / height)) * 2.0 - 1.0;
+  const torch::Tensor grid = torch::stack({gx, gy}, -1).view({1, 1, -1, 2});
+  const torch::Tensor image = photo.to(u.options()).unsqueeze(0);  // [1,3,H,W]
+  namespace F = torch::nn::functional;
+  const torch::Tensor sampled = F::grid_sample(
+      image, grid,
+      F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder).align_corners(true));
+  return sampled.view({3, -1}).t();  // [n,3]
+}
+
 std::array<double, 3> RandomColor(Rng& rng) {
   // A random hue at moderate saturation and a brightness spread like natural
   // reflectances (rarely pure black or white, which would clip).
@@ -121,9 +147,32 @@ TextureSpec RandomTexture(Rng& rng) {
   return spec;
 }
 
+TextureSpec RandomPhotoTexture(Rng& rng, int num_photos) {
+  if (num_photos < 1) throw std::invalid_argument("RandomPhotoTexture: no photos");
+  TextureSpec spec;
+  spec.photo = static_cast<int>(rng.Int(0, num_photos - 1));
+  spec.frequency = rng.LogUniform(0.5, 3);
+  spec.angle = rng.Uniform(0, 2 * kPi);
+  spec.detail = rng.Uniform(0.0, 0.1);
+  spec.detail_frequency = rng.LogUniform(4, 32);
+  spec.seed = static_cast<uint32_t>(rng.NextU64() >> 32);
+  return spec;
+}
+
+void CheckPhotoSet(const PhotoSet& photos) {
+  for (size_t i = 0; i < photos.size(); ++i) {
+    const torch::Tensor& p = photos[i];
+    if (!p.defined() || p.dim() != 3 || p.size(0) != 3 || p.size(1) < 2 || p.size(2) < 2 ||
+        !p.is_floating_point() || !p.device().is_cpu()) {
+      throw std::invalid_argument("photo " + std::to_string(i) +
+                                  ": expected a floating [3,H,W] CPU tensor with H, W >= 2");
+    }
+  }
+}
+
 torch::Tensor EvaluateAlbedo(const std::vector<TextureSpec>& textures,
                              const torch::Tensor& texture, const torch::Tensor& uv,
-                             const std::array<double, 3>& empty_color) {
+                             const std::array<double, 3>& empty_color, const PhotoSet* photos) {
   if (texture.dim() != 1 || uv.dim() != 2 || uv.size(1) != 2 || uv.size(0) != texture.size(0)) {
     throw std::invalid_argument("EvaluateAlbedo: expected texture [N] and uv [N,2]");
   }
@@ -145,6 +194,16 @@ torch::Tensor EvaluateAlbedo(const std::vector<TextureSpec>& textures,
     if (index.numel() == 0) continue;
     const TextureSpec& spec = textures[static_cast<size_t>(t)];
     const torch::Tensor points = uv.index_select(0, index);
+    if (spec.photo >= 0) {
+      if (photos == nullptr || spec.photo >= static_cast<int>(photos->size())) {
+        throw std::invalid_argument("EvaluateAlbedo: texture " + std::to_string(t) + " uses photo " +
+                                    std::to_string(spec.photo) + ", which the photo set does not hold");
+      }
+      albedo.index_copy_(0, index,
+                         PhotoColor(spec, (*photos)[static_cast<size_t>(spec.photo)],
+                                    points.select(1, 0), points.select(1, 1)));
+      continue;
+    }
     const torch::Tensor p = PatternValue(spec, points.select(1, 0), points.select(1, 1)).unsqueeze(1);  // [n,1]
     const torch::Tensor a = torch::tensor({spec.color_a[0], spec.color_a[1], spec.color_a[2]}, options);
     const torch::Tensor b = torch::tensor({spec.color_b[0], spec.color_b[1], spec.color_b[2]}, options);

@@ -265,5 +265,90 @@ TEST(ShadingTest, RandomPhotometryStaysInItsRanges) {
   }
 }
 
+// 1 - |(t mod 2) - 1| in plain double arithmetic.
+double MirrorReference(double t) {
+  const double m = t - 2.0 * std::floor(t / 2.0);
+  return 1.0 - std::abs(m - 1.0);
+}
+
+// Bilinear interpolation of channel c of a [3,H,W] photo at pixel (x, y).
+double BilinearReference(const torch::Tensor& photo, int c, double x, double y) {
+  const auto a = photo.accessor<double, 3>();
+  const int64_t h = photo.size(1), w = photo.size(2);
+  const int64_t x0 = std::min<int64_t>(static_cast<int64_t>(std::floor(x)), w - 2);
+  const int64_t y0 = std::min<int64_t>(static_cast<int64_t>(std::floor(y)), h - 2);
+  const double fx = x - static_cast<double>(x0), fy = y - static_cast<double>(y0);
+  return (1 - fx) * (1 - fy) * a[c][y0][x0] + fx * (1 - fy) * a[c][y0][x0 + 1] +
+         (1 - fx) * fy * a[c][y0 + 1][x0] + fx * fy * a[c][y0 + 1][x0 + 1];
+}
+
+// A photo texture reads its photo as texture.h says: rotated, scaled
+// coordinates, mirrored repeats, aspect kept, bilinear interpolation; with a
+// zero detail amplitude the albedo is exactly the photo's colour.
+TEST(TextureTest, PhotoTextureReadsThePhotoWithMirroredRepeats) {
+  torch::manual_seed(3);
+  const PhotoSet photos{torch::rand({3, 4, 6}, torch::kDouble), torch::rand({3, 5, 5}, torch::kDouble)};
+  TextureSpec spec;
+  spec.photo = 0;
+  spec.frequency = 1.7;
+  spec.angle = 0.4;
+  spec.detail = 0;
+  const torch::Tensor uv = torch::tensor({{0.1, 0.2}, {0.9, -0.35}, {1.6, 0.3}, {-2.2, 3.1}, {0.0, 0.0}},
+                                         torch::kDouble);
+  const torch::Tensor texture = torch::zeros({uv.size(0)}, torch::kLong);
+  const torch::Tensor albedo = EvaluateAlbedo({spec}, texture, uv, {0, 0, 0}, &photos);
+  const double w = 6, h = 4;
+  for (int64_t i = 0; i < uv.size(0); ++i) {
+    const double u = uv[i][0].item<double>(), v = uv[i][1].item<double>();
+    const double ru = (u * std::cos(spec.angle) + v * std::sin(spec.angle)) * spec.frequency;
+    const double rv = (v * std::cos(spec.angle) - u * std::sin(spec.angle)) * spec.frequency;
+    const double x = MirrorReference(ru) * (w - 1), y = MirrorReference(rv * w / h) * (h - 1);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(albedo[i][c].item<double>(), BilinearReference(photos[0], c, x, y), 1e-12)
+          << "point " << i << " channel " << c;
+    }
+  }
+  // A photo index the set does not hold is refused, as is no set at all.
+  spec.photo = 2;
+  EXPECT_THROW(EvaluateAlbedo({spec}, texture, uv, {0, 0, 0}, &photos), std::invalid_argument);
+  spec.photo = 0;
+  EXPECT_THROW(EvaluateAlbedo({spec}, texture, uv), std::invalid_argument);
+  EXPECT_THROW(CheckPhotoSet({torch::rand({4, 4})}), std::invalid_argument);
+  EXPECT_NO_THROW(CheckPhotoSet(photos));
+}
+
+// Photos change the scenes only when used: a zero probability (or no
+// photos) draws exactly the procedural scene; probability 1 makes every
+// texture a photo texture, and the images change.
+TEST(TextureTest, PhotoTexturesInTheGenerator) {
+  SynthConfig config;
+  config.height = 48;
+  config.width = 64;
+  config.num_views = 2;
+  const SynthSample plain = GenerateSample(config, 77, torch::kCPU);
+  auto photos = std::make_shared<PhotoSet>();
+  torch::manual_seed(4);
+  photos->push_back(torch::rand({3, 30, 40}));
+  photos->push_back(torch::rand({3, 20, 20}));
+  config.photos = photos;
+  config.photo_probability = 0;
+  EXPECT_TRUE(torch::equal(GenerateSample(config, 77, torch::kCPU).images, plain.images));
+
+  config.photo_probability = 1;
+  const SynthScene scene = DrawScene(config, 77);
+  std::set<int> used;
+  for (const TextureSpec& spec : scene.scene.textures) {
+    EXPECT_GE(spec.photo, 0);
+    EXPECT_LT(spec.photo, 2);
+    used.insert(spec.photo);
+  }
+  EXPECT_EQ(used.size(), 2u);
+  const SynthSample with_photos = RenderSample(scene, config, torch::kCPU);
+  EXPECT_FALSE(torch::equal(with_photos.images, plain.images));
+  EXPECT_TRUE(torch::isfinite(with_photos.images).all().item<bool>());
+  config.photo_probability = 1.5;
+  EXPECT_THROW(config.Check(), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace dispmvs::synth

@@ -20,6 +20,7 @@
 #include "model/loss.h"
 #include "model/safetensors.h"
 #include "synth/generator.h"
+#include "synth/photo_folder.h"
 #include "train/batch.h"
 #include "train/mvsnet_dataset.h"
 
@@ -231,6 +232,26 @@ std::string InitWeightsSetting(const std::string& path) {
   return text;
 }
 
+// The photo folder as a run setting: its absolute path, and a hash of the
+// names and sizes of its files (sorted), so that a changed folder is noticed.
+std::string TextureDirSetting(const std::string& dir) {
+  if (dir.empty()) return "";
+  std::vector<std::pair<std::string, uintmax_t>> files;
+  for (const fs::directory_entry& entry : fs::directory_iterator(dir)) {
+    if (entry.is_regular_file()) files.emplace_back(entry.path().filename().string(), entry.file_size());
+  }
+  std::sort(files.begin(), files.end());
+  uint64_t hash = 14695981039346656037ull;
+  const auto mix = [&](const std::string& text) {
+    for (const char c : text) hash = (hash ^ static_cast<unsigned char>(c)) * 1099511628211ull;
+  };
+  for (const auto& [name, size] : files) mix(name + "\n" + std::to_string(size) + "\n");
+  char text[40];
+  std::snprintf(text, sizeof text, " (%zu files, fnv1a64 %016llx)", files.size(),
+                static_cast<unsigned long long>(hash));
+  return MvsnetRootSetting(dir) + text;
+}
+
 // The settings that change what a step computes: a checkpoint can only be
 // resumed by a run with the same ones (the total step count may differ).
 std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
@@ -256,7 +277,9 @@ std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
           {"train_widening_max", widening.str()},
           {"mvsnet_root", MvsnetRootSetting(o.mvsnet_root)},
           {"mvsnet_fraction", mvsnet_fraction.str()},
-          {"init_weights", InitWeightsSetting(o.init_weights)}};
+          {"init_weights", InitWeightsSetting(o.init_weights)},
+          {"texture_dir", TextureDirSetting(o.texture_dir)},
+          {"photo_probability", o.texture_dir.empty() ? "" : std::to_string(o.photo_probability)}};
 }
 
 // Settings added after checkpoints were first written, with the value that a
@@ -266,6 +289,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "mvsnet_fraction") return "1";
   if (key == "train_widening_max") return "1";
   if (key == "init_weights") return "";
+  if (key == "texture_dir" || key == "photo_probability") return "";
   return std::nullopt;
 }
 
@@ -405,6 +429,12 @@ void TrainOptions::Check(bool for_training) const {
   }
   // A fraction of a data set that is not there is a mistake, not a request.
   if (mvsnet_root.empty() && mvsnet_fraction != 1) fail("mvsnet_fraction needs mvsnet_root");
+  if (!texture_dir.empty() && !fs::is_directory(texture_dir)) {
+    fail("texture_dir: no such folder " + texture_dir);
+  }
+  if (!(photo_probability >= 0 && photo_probability <= 1)) {
+    fail("photo_probability must be in [0, 1], got " + std::to_string(photo_probability));
+  }
   if (!init_weights.empty() && !fs::is_regular_file(init_weights)) {
     fail("init_weights: no such file " + init_weights);
   }
@@ -465,7 +495,17 @@ void Train(const TrainOptions& options, std::ostream& console) {
              InitWeightsSetting(options.init_weights) + ")");
   }
 
-  const auto synth_config = SynthConfigFor(options);
+  auto synth_config = SynthConfigFor(options);  // of the training samples
+  if (!options.texture_dir.empty()) {
+    std::ostringstream warnings;
+    synth_config.photos = std::make_shared<const synth::PhotoSet>(
+        synth::LoadPhotoFolder(options.texture_dir, {}, &warnings));
+    synth_config.photo_probability = options.photo_probability;
+    std::istringstream lines(warnings.str());
+    for (std::string line; std::getline(lines, line);) log.Line(line);
+    log.Line("photo textures: " + std::to_string(synth_config.photos->size()) + " photos from " +
+             options.texture_dir + ", probability " + std::to_string(options.photo_probability));
+  }
   const auto mvsnet = OpenMvsnetSource(options, synth_config);
   if (mvsnet) {
     log.Line("MVSNet data set " + options.mvsnet_root + ": " + std::to_string(mvsnet->dataset.scans.size()) +

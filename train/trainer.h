@@ -55,6 +55,12 @@ struct TrainOptions {
   // stays on generated scenes, so its numbers stay comparable across runs.
   std::string mvsnet_root;
   double mvsnet_fraction = 1.0;  // in [0, 1]; must stay 1 without mvsnet_root
+  // Photographs for photo textures of the generated training scenes
+  // (synth/photo_folder.h; empty = procedural textures only): each texture is
+  // a photo with photo_probability. Validation stays procedural. A run
+  // setting, identified by the folder's path and its files' names and sizes.
+  std::string texture_dir;
+  double photo_probability = 0.5;
   // Weights to start from instead of the random initialisation (fine-tuning,
   // e.g. at a larger size from the shipped model); empty = random. The file's
   // tensors must fit `config`. A run setting, identified by the file's

@@ -1,0 +1,35 @@
+#pragma once
+// Photographs from a folder for photo textures (texture.h): e.g. a wallpaper
+// package (`apt-get install gnome-backgrounds`: /usr/share/backgrounds) or
+// any folder of the user's pictures.
+//
+// Decoding needs OpenCV, which the LibTorch-only build (a bare GPU machine)
+// lacks: there LoadPhotoFolder throws, saying so, and only procedural
+// textures are available. PhotoFolderAvailable() tells which build this is.
+
+#include <cstdint>
+#include <ostream>
+#include <string>
+
+#include "synth/texture.h"
+
+namespace dispmvs::synth {
+
+struct PhotoFolderOptions {
+  int max_photos = 64;   // the first ones in name order (memory: ~2.4 MB each at 512 px)
+  int max_side = 512;    // larger photos are shrunk (area averaging) to this longest side
+  int min_side = 16;     // smaller ones are skipped with a warning
+};
+
+bool PhotoFolderAvailable();
+
+// Every .png, .jpg, .jpeg, .bmp, .tif, .tiff or .webp file directly in
+// `folder` (case-insensitive extension, name order), decoded as RGB in
+// [0, 1]. Files that cannot be decoded, or are too small, are skipped with a
+// warning line on `warnings` (when not null). Throws std::invalid_argument
+// when the folder does not exist or yields no photo, and std::runtime_error
+// in a build without OpenCV.
+PhotoSet LoadPhotoFolder(const std::string& folder, const PhotoFolderOptions& options = {},
+                         std::ostream* warnings = nullptr);
+
+}  // namespace dispmvs::synth
