@@ -15,6 +15,7 @@ packages=(
   libgtest-dev libgmock-dev
   libbenchmark-dev        # microbenchmarks in bench/
   colmap                  # the real peer in the interop tests
+  unzip                   # bench/motorcycle_check.sh: the disparity inside scikit-image's .npz
 )
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq "${packages[@]}"

@@ -84,7 +84,7 @@ std::string SizeText(int width, int height) {
 
 std::string Number(double value) {
   std::ostringstream out;
-  out.precision(17);
+  out.precision(12);  // the README is for people; the values are in sparse/ exactly
   out << value;
   return out.str();
 }

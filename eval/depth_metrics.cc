@@ -19,6 +19,25 @@ std::string SizeText(int width, int height) {
   return std::to_string(width) + "x" + std::to_string(height);
 }
 
+// The checks both scorers make before matching pixels.
+void CheckComparable(const colmap_io::DenseArray& prediction, const colmap_io::DenseArray& gt) {
+  if (prediction.empty() || gt.empty()) {
+    throw std::invalid_argument("depth map or ground truth is empty");
+  }
+  if (prediction.channels() != 1 || gt.channels() != 1) {
+    throw std::invalid_argument("depth maps must have 1 channel (prediction has " +
+                                std::to_string(prediction.channels()) + ", ground truth " +
+                                std::to_string(gt.channels()) + ")");
+  }
+  const int width = prediction.width();
+  const int height = prediction.height();
+  if (!IsCleanScale(width, height, gt.width(), gt.height())) {
+    throw std::invalid_argument("depth map is " + SizeText(width, height) +
+                                " but its ground truth is " + SizeText(gt.width(), gt.height()) +
+                                ": not the same size nor a down-scale of it by one factor");
+  }
+}
+
 }  // namespace
 
 void RelErrorHistogram::Add(double rel_error) {
@@ -126,21 +145,9 @@ int NearestGtIndex(int index, int map_size, int gt_size) {
 
 DepthMetricSums SumDepthMetrics(const colmap_io::DenseArray& prediction,
                                 const colmap_io::DenseArray& gt, cv::Mat* rel_error) {
-  if (prediction.empty() || gt.empty()) {
-    throw std::invalid_argument("depth map or ground truth is empty");
-  }
-  if (prediction.channels() != 1 || gt.channels() != 1) {
-    throw std::invalid_argument("depth maps must have 1 channel (prediction has " +
-                                std::to_string(prediction.channels()) + ", ground truth " +
-                                std::to_string(gt.channels()) + ")");
-  }
+  CheckComparable(prediction, gt);
   const int width = prediction.width();
   const int height = prediction.height();
-  if (!IsCleanScale(width, height, gt.width(), gt.height())) {
-    throw std::invalid_argument("depth map is " + SizeText(width, height) +
-                                " but its ground truth is " + SizeText(gt.width(), gt.height()) +
-                                ": not the same size nor a down-scale of it by one factor");
-  }
   std::vector<int> gt_cols(width);
   for (int col = 0; col < width; ++col) gt_cols[col] = NearestGtIndex(col, width, gt.width());
 
@@ -175,6 +182,71 @@ DepthMetricSums SumDepthMetrics(const colmap_io::DenseArray& prediction,
         code = static_cast<float>(rel);
       }
       if (error_line != nullptr) error_line[col] = code;
+    }
+  }
+  return sums;
+}
+
+DisparityMetricSums& DisparityMetricSums::operator+=(const DisparityMetricSums& other) {
+  views += other.views;
+  gt_pixels += other.gt_pixels;
+  predicted += other.predicted;
+  within_1px += other.within_1px;
+  within_2px += other.within_2px;
+  error_sum += other.error_sum;
+  return *this;
+}
+
+DisparityMetrics Finalize(const DisparityMetricSums& sums) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  DisparityMetrics m;
+  m.applicable = sums.views > 0;
+  if (!m.applicable) {
+    m.mean_error = m.within_1px_of_predicted = m.within_2px_of_predicted = nan;
+    m.within_1px_of_gt = m.within_2px_of_gt = nan;
+    return m;
+  }
+  m.gt_pixels = sums.gt_pixels;
+  m.predicted = sums.predicted;
+  const double gt = static_cast<double>(sums.gt_pixels);
+  const double pred = static_cast<double>(sums.predicted);
+  m.mean_error = pred > 0 ? sums.error_sum / pred : nan;
+  m.within_1px_of_predicted = pred > 0 ? sums.within_1px / pred : nan;
+  m.within_2px_of_predicted = pred > 0 ? sums.within_2px / pred : nan;
+  m.within_1px_of_gt = gt > 0 ? sums.within_1px / gt : nan;
+  m.within_2px_of_gt = gt > 0 ? sums.within_2px / gt : nan;
+  return m;
+}
+
+DisparityMetricSums SumDisparityMetrics(const colmap_io::DenseArray& prediction,
+                                        const colmap_io::DenseArray& gt, double focal_baseline) {
+  if (!(std::isfinite(focal_baseline) && focal_baseline > 0)) {
+    throw std::invalid_argument("focal length x baseline must be finite and > 0, not " +
+                                std::to_string(focal_baseline));
+  }
+  CheckComparable(prediction, gt);
+  const int width = prediction.width();
+  const int height = prediction.height();
+  std::vector<int> gt_cols(width);
+  for (int col = 0; col < width; ++col) gt_cols[col] = NearestGtIndex(col, width, gt.width());
+
+  DisparityMetricSums sums;
+  sums.views = 1;
+  for (int row = 0; row < height; ++row) {
+    const int gt_row = NearestGtIndex(row, height, gt.height());
+    const float* gt_line = gt.data() + static_cast<std::size_t>(gt_row) * gt.width();
+    const float* pred_line = prediction.data() + static_cast<std::size_t>(row) * width;
+    for (int col = 0; col < width; ++col) {
+      const float g = gt_line[gt_cols[col]];
+      if (!ValidDepth(g)) continue;
+      ++sums.gt_pixels;
+      const float d = pred_line[col];
+      if (!ValidDepth(d)) continue;
+      ++sums.predicted;
+      const double error = std::abs(focal_baseline / d - focal_baseline / g);
+      sums.error_sum += error;
+      if (error < 1.0) ++sums.within_1px;
+      if (error < 2.0) ++sums.within_2px;
     }
   }
   return sums;

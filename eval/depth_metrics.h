@@ -126,4 +126,54 @@ constexpr float kRelErrorNoGt = -2.0f;     // no GT surface
 DepthMetricSums SumDepthMetrics(const colmap_io::DenseArray& prediction,
                                 const colmap_io::DenseArray& gt, cv::Mat* rel_error = nullptr);
 
+// ---- Disparity error of a view in a rectified stereo pair (rectified_pair.h)
+//
+// For an image with a rectified partner at baseline B, depth z and disparity
+// are tied by disparity = f_x B / z + doffs, doffs being the principal-point
+// offset of the pair; doffs cancels in the difference, so the error of a
+// predicted pixel is |f_x B / d - f_x B / gt| in pixels. f_x is the camera's
+// focal length scaled to the GT map's width, so the error stays in pixels of
+// the GT's resolution when the map itself is smaller (pixels are matched as
+// in SumDepthMetrics). Over the same pixels as DepthMetricSums:
+//   mean_error              mean disparity error over the predicted pixels
+//   within_Npx_of_predicted predicted pixels with error < N px (N = 1, 2),
+//                           of the predicted pixels
+//   within_Npx_of_gt        the same count, of all GT pixels
+// The sums accumulate over views like DepthMetricSums; `views` counts the
+// views that had a partner, so a type whose views have none reports
+// "not applicable" (DisparityMetrics::applicable false).
+
+struct DisparityMetricSums {
+  int64_t views = 0;       // views with a rectified partner summed in here
+  int64_t gt_pixels = 0;   // valid GT pixels (at the map's size)
+  int64_t predicted = 0;   // ... with a valid prediction
+  int64_t within_1px = 0;  // predicted with disparity error < 1 px
+  int64_t within_2px = 0;  // ... < 2 px
+  double error_sum = 0;    // sum of the disparity errors (px) over predicted
+
+  DisparityMetricSums& operator+=(const DisparityMetricSums& other);
+};
+
+// Fractions (not percent). Where not applicable every value is NaN and the
+// counts 0; where applicable, NaN as in DepthMetrics (no GT pixel / no
+// prediction).
+struct DisparityMetrics {
+  bool applicable = false;
+  int64_t gt_pixels = 0;
+  int64_t predicted = 0;
+  double mean_error = 0;
+  double within_1px_of_predicted = 0, within_2px_of_predicted = 0;
+  double within_1px_of_gt = 0, within_2px_of_gt = 0;
+};
+
+DisparityMetrics Finalize(const DisparityMetricSums& sums);
+
+// Scores `prediction` against `gt` in disparity for a view whose
+// focal_baseline = f_x B (f_x at the GT's resolution, B in the depth maps'
+// units; so the disparity of depth z is focal_baseline / z pixels). The
+// result has views = 1. Throws std::invalid_argument as SumDepthMetrics, and
+// when focal_baseline is not finite and > 0.
+DisparityMetricSums SumDisparityMetrics(const colmap_io::DenseArray& prediction,
+                                        const colmap_io::DenseArray& gt, double focal_baseline);
+
 }  // namespace dispmvs::eval

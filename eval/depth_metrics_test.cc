@@ -180,5 +180,101 @@ TEST(EvalRelErrorHistogramTest, MedianWithinItsBin) {
   EXPECT_NEAR(h.Median(), 0.05009, 0.05009 * 1.2e-3);
 }
 
+// Disparity of depth z for f B = kFocalBaseline, and the depth of a disparity.
+constexpr double kFocalBaseline = 16.0;  // e.g. f = 8 px, B = 2
+float DepthOfDisparity(double disparity) { return static_cast<float>(kFocalBaseline / disparity); }
+
+TEST(EvalDisparityMetricsTest, KnownDisparityShifts) {
+  // GT: a fronto-parallel plane at z = 4, disparity 16 / 4 = 4 px. The
+  // predictions shift the disparity by +0.5, -1.5, +3 and -0.999 px; one GT
+  // pixel has no prediction and one prediction has no GT.
+  const float z = 4.0f;
+  const DenseArray gt = Map({{z, z, z, z}, {z, z, z, 0}});
+  const DenseArray pred = Map({{DepthOfDisparity(4.5), DepthOfDisparity(2.5), DepthOfDisparity(7.0),
+                                DepthOfDisparity(3.001)},
+                               {0, z, kNaN, 2.0f}});
+  const DisparityMetricSums sums = SumDisparityMetrics(pred, gt, kFocalBaseline);
+  EXPECT_EQ(sums.views, 1);
+  EXPECT_EQ(sums.gt_pixels, 7);
+  EXPECT_EQ(sums.predicted, 5);
+  EXPECT_EQ(sums.within_1px, 3);  // 0.5, 0.999 and 0
+  EXPECT_EQ(sums.within_2px, 4);  // and 1.5
+  EXPECT_NEAR(sums.error_sum, 0.5 + 1.5 + 3.0 + 0.999 + 0.0, 1e-5);
+
+  const DisparityMetrics m = Finalize(sums);
+  EXPECT_TRUE(m.applicable);
+  EXPECT_EQ(m.gt_pixels, 7);
+  EXPECT_EQ(m.predicted, 5);
+  EXPECT_NEAR(m.mean_error, 5.999 / 5, 1e-6);
+  EXPECT_DOUBLE_EQ(m.within_1px_of_predicted, 3.0 / 5);
+  EXPECT_DOUBLE_EQ(m.within_2px_of_predicted, 4.0 / 5);
+  EXPECT_DOUBLE_EQ(m.within_1px_of_gt, 3.0 / 7);
+  EXPECT_DOUBLE_EQ(m.within_2px_of_gt, 4.0 / 7);
+
+  // Same depths, three times the baseline: every disparity error triples, to
+  // 1.5, 4.5, 9, 2.997 and 0 px.
+  const DisparityMetricSums tripled = SumDisparityMetrics(pred, gt, 3 * kFocalBaseline);
+  EXPECT_NEAR(tripled.error_sum, 3 * sums.error_sum, 1e-5);
+  EXPECT_EQ(tripled.within_1px, 1);
+  EXPECT_EQ(tripled.within_2px, 2);
+}
+
+TEST(EvalDisparityMetricsTest, SlantedPlaneAndSmallerMap) {
+  // GT 8x4: disparity 2 + 0.25 col (a slanted plane); a 4x2 map compares
+  // map pixel (c, r) with GT pixel (2c, 2r). Its depths carry a 1.5 px error
+  // at the GT's resolution: the focal length passed in decides the unit.
+  DenseArray gt(8, 4, 1);
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 8; ++c) gt.at(r, c) = DepthOfDisparity(2.0 + 0.25 * c);
+  }
+  DenseArray pred(4, 2, 1);
+  for (int r = 0; r < 2; ++r) {
+    for (int c = 0; c < 4; ++c) pred.at(r, c) = DepthOfDisparity(2.0 + 0.25 * (2 * c) + 1.5);
+  }
+  const DisparityMetrics m = Finalize(SumDisparityMetrics(pred, gt, kFocalBaseline));
+  EXPECT_EQ(m.gt_pixels, 8);
+  EXPECT_EQ(m.predicted, 8);
+  EXPECT_NEAR(m.mean_error, 1.5, 1e-5);
+  EXPECT_EQ(m.within_1px_of_gt, 0.0);
+  EXPECT_EQ(m.within_2px_of_gt, 1.0);
+}
+
+TEST(EvalDisparityMetricsTest, SumsAddUpAndNotApplicableIsNaN) {
+  const DenseArray gt = Map({{4, 4}});
+  DisparityMetricSums a = SumDisparityMetrics(Map({{DepthOfDisparity(4.5), 0}}), gt, kFocalBaseline);
+  const DisparityMetricSums b = SumDisparityMetrics(Map({{DepthOfDisparity(7.0), 4}}), gt,
+                                                    kFocalBaseline);
+  a += b;
+  EXPECT_EQ(a.views, 2);
+  const DisparityMetrics m = Finalize(a);
+  EXPECT_EQ(m.gt_pixels, 4);
+  EXPECT_EQ(m.predicted, 3);
+  EXPECT_NEAR(m.mean_error, (0.5 + 3.0 + 0.0) / 3, 1e-6);
+  EXPECT_DOUBLE_EQ(m.within_1px_of_gt, 0.5);
+  EXPECT_DOUBLE_EQ(m.within_2px_of_predicted, 2.0 / 3);
+
+  // No view with a partner: not applicable, every number NaN.
+  const DisparityMetrics none = Finalize(DisparityMetricSums{});
+  EXPECT_FALSE(none.applicable);
+  EXPECT_EQ(none.gt_pixels, 0);
+  EXPECT_TRUE(std::isnan(none.mean_error));
+  EXPECT_TRUE(std::isnan(none.within_1px_of_gt));
+  EXPECT_TRUE(std::isnan(none.within_2px_of_predicted));
+  // A view with a partner but no prediction: applicable, fractions of GT 0.
+  const DisparityMetrics empty = Finalize(SumDisparityMetrics(Map({{0, 0}}), gt, kFocalBaseline));
+  EXPECT_TRUE(empty.applicable);
+  EXPECT_EQ(empty.within_1px_of_gt, 0.0);
+  EXPECT_TRUE(std::isnan(empty.mean_error));
+}
+
+TEST(EvalDisparityMetricsTest, RejectsBadInput) {
+  const DenseArray gt(8, 6, 1, 1.0f);
+  EXPECT_THROW(SumDisparityMetrics(DenseArray(6, 3, 1, 1.0f), gt, 1.0), std::invalid_argument);
+  EXPECT_THROW(SumDisparityMetrics(DenseArray(8, 6, 1, 1.0f), gt, 0.0), std::invalid_argument);
+  EXPECT_THROW(SumDisparityMetrics(DenseArray(8, 6, 1, 1.0f), gt, -2.0), std::invalid_argument);
+  EXPECT_THROW(SumDisparityMetrics(DenseArray(8, 6, 1, 1.0f), gt, kNaN), std::invalid_argument);
+  EXPECT_NO_THROW(SumDisparityMetrics(DenseArray(4, 3, 1, 1.0f), gt, 1.0));
+}
+
 }  // namespace
 }  // namespace dispmvs::eval

@@ -25,7 +25,8 @@ using namespace dispmvs;
 constexpr const char* kDescription = R"(dispmvs_eval: depth-map and point-cloud accuracy against ground truth.
 
 Usage: dispmvs_eval --workspace_path WS [--types T1,T2,...] [--ply FILE ...]
-                    [--json OUT.json] [--png_dir DIR] [--per_view] [options]
+                    [--json OUT.json] [--tsv OUT.tsv] [--png_dir DIR] [--per_view]
+                    [options]
 
 WS is a COLMAP dense workspace (WS/sparse with PINHOLE or SIMPLE_PINHOLE
 cameras, WS/images, WS/stereo/depth_maps/NAME.TYPE.bin) with ground truth:
@@ -43,6 +44,18 @@ the GT pixels (finite, > 0), a prediction is valid when finite and > 0.
   <X%pred    predicted pixels with |d - gt| / gt < X %, of the predicted ones
   <X%all     the same count, of all GT pixels (a missing prediction = miss)
 Overall rows weight every pixel equally; views = maps found / images with GT.
+
+Rectified stereo pairs: an image with GT whose camera and another registered
+image's form a rectified pair (same rotation within 1e-9 per matrix entry,
+camera centres apart along the camera x-axis only (y, z below 1e-9 of the
+baseline B), equal fx, fy and cy, PINHOLE or SIMPLE_PINHOLE; the shortest
+baseline if several) is also scored in disparity, in pixels of the GT's
+resolution: error |f B / d - f B / gt| (f = fx at the GT's size; doffs cancels).
+Five columns are then added (only when some image has such a partner):
+  disp_err   mean disparity error over the predicted pixels, pixels
+  <Npxpred   predicted pixels with disparity error < N px (N = 1, 2)
+  <Npxall    the same count, of all GT pixels
+with "n/a" for views without a partner.
 Maps smaller than the GT (max_image_size) are compared at their own size,
 sampling the GT at the nearest pixel of the same position in COLMAP's dense
 convention: map pixel (col, row) of a map scaled by s = map size / image size
@@ -69,12 +82,26 @@ depth blue to its max red, no depth black) and DIR/NAME.TYPE.error.png
 (relative error 0 blue to --png_max_error and above red; GT without a
 prediction white; no GT black). Files are written atomically.
 
+--tsv FILE writes a summary for scripts that add up many workspaces exactly:
+tab-separated, '#' lines are comments, a '#' header line with the column
+names before each kind of record, then one record per depth TYPE
+  depth TYPE views gt_pixels predicted within_1 within_2 within_5 abs_rel_sum
+        disparity_gt_pixels disparity_within_1px disparity_within_2px
+(integer pixel counts summed over the type's views; abs_rel_sum = sum of
+|d - gt| / gt over the predicted pixels, %.17g; disparity counts 0 where no
+view has a rectified partner) and one record per --ply
+  cloud PLY points gt_points accuracy completeness overall precision recall
+        fscore tau cutoff
+(%.17g, "nan" for NaN). E.g. <2%all over workspaces:
+  awk -F'\t' '$1 == "depth" && $2 == T { g += $4; w += $7 } END { print w / g }' T=dispmvs.geometric */eval.tsv
+
 Options)";
 
 struct Options {
   std::string workspace_path;
   std::string types;
   std::string json_path;
+  std::string tsv_path;
   bool per_view = false;
   eval::WorkspaceEvalOptions eval;
 };
@@ -113,6 +140,9 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "e.g. WS/fused.ply; repeat or list several.")
       ("json", po::value<std::string>(&o.json_path),
        "Also write every number (unrounded, per view too) to this JSON file.")
+      ("tsv", po::value<std::string>(&o.tsv_path),
+       "Also write the summary above (pixel counts and sums per TYPE, one record per cloud) "
+       "to this tab-separated file.")
       ("png_dir", po::value<std::string>(&o.eval.png_dir),
        "Write colourised depth and relative-error PNGs here (see above).")
       ("per_view", po::bool_switch(&o.per_view), "Print one row per view under each TYPE.")
@@ -143,6 +173,19 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
   }
   if (values.count("types") > 0) o.eval.types = SplitTypes(o.types);
+  if (values.count("json") > 0 && o.json_path.empty()) {
+    throw std::invalid_argument("--json needs a file name");
+  }
+  if (values.count("tsv") > 0) {
+    if (o.tsv_path.empty()) throw std::invalid_argument("--tsv needs a file name");
+    // Refused here rather than after a long evaluation.
+    for (const std::string& ply : o.eval.ply_paths) {
+      if (ply.find_first_of("\t\n\r") != std::string::npos) {
+        throw std::invalid_argument("--ply \"" + ply +
+                                    "\" contains a tab or a line break, which --tsv cannot hold");
+      }
+    }
+  }
   // Name the options rather than the fields.
   if (!(o.eval.tau >= 0)) throw std::invalid_argument("--tau must be >= 0");
   if (!(o.eval.cutoff >= 0)) throw std::invalid_argument("--cutoff must be >= 0");
@@ -164,6 +207,10 @@ int Run(const Options& options) {
   if (!options.json_path.empty()) {
     eval::WriteJsonReport(report, options.json_path);
     std::cout << "json: " << options.json_path << '\n';
+  }
+  if (!options.tsv_path.empty()) {
+    eval::WriteTsvReport(report, options.tsv_path);
+    std::cout << "tsv: " << options.tsv_path << '\n';
   }
   return 0;
 }

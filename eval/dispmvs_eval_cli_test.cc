@@ -75,6 +75,41 @@ double JsonNumberAfter(const std::string& json, const std::string& key, int occu
   return std::strtod(json.c_str() + at + key.size() + 4, nullptr);
 }
 
+// The number after the first "KEY": at or after `from` in `json`.
+double JsonNumberFrom(const std::string& json, std::size_t from, const std::string& key) {
+  const std::size_t at = json.find("\"" + key + "\": ", from);
+  if (from == std::string::npos || at == std::string::npos) {
+    ADD_FAILURE() << "no \"" << key << "\" after position " << from;
+    return std::nan("");
+  }
+  return std::strtod(json.c_str() + at + key.size() + 4, nullptr);
+}
+
+// Whitespace-separated cells of a table line.
+std::vector<std::string> Cells(const std::string& line) {
+  std::vector<std::string> cells;
+  std::istringstream in(line);
+  for (std::string cell; in >> cell;) cells.push_back(cell);
+  return cells;
+}
+
+std::vector<std::string> Fields(const std::string& line) {
+  std::vector<std::string> fields;
+  std::size_t begin = 0;
+  for (;;) {
+    const std::size_t tab = line.find('\t', begin);
+    fields.push_back(line.substr(begin, tab - begin));
+    if (tab == std::string::npos) return fields;
+    begin = tab + 1;
+  }
+}
+
+// Expects `actual` within a relative 1e-9 of `expected` (the JSON has 10
+// significant digits).
+void ExpectClose(double actual, double expected, const std::string& what) {
+  EXPECT_NEAR(actual, expected, 1e-9 * std::max(1.0, std::abs(expected))) << what;
+}
+
 std::vector<std::string> Lines(const std::string& text) {
   std::vector<std::string> lines;
   std::istringstream in(text);
@@ -92,8 +127,10 @@ class EvalCliTest : public ::testing::Test {
     const auto camera = builder.AddPinholeCamera(kWidth, kHeight, 8, 8, 4, 3);
     const auto a = builder.AddImageWithPose(camera, "a.png", Eigen::Matrix3d::Identity(),
                                             Eigen::Vector3d::Zero());
+    // b's centre (1, 0.25, 0) is off a's x-axis: not a rectified pair, so the
+    // table has no disparity columns (RectifiedPairAddsDisparityColumns has them).
     const auto b = builder.AddImageWithPose(camera, "b.png", Eigen::Matrix3d::Identity(),
-                                            Eigen::Vector3d(-1, 0, 0));
+                                            Eigen::Vector3d(-1, -0.25, 0));
     builder.AddPoint({0.5, 0, 3}, {a, b});
     model_ = builder.model();
     colmap_io::WriteSparseModelBinary(model_, ws_ / "sparse");
@@ -326,11 +363,226 @@ TEST_F(EvalCliTest, MapsOfImagesWithoutGroundTruthAreNotScored) {
   ExpectError(RunEval(dir_, Ws() + " --types only_c"), "no depth map of type(s) only_c");
 }
 
+TEST_F(EvalCliTest, RectifiedPairAddsDisparityColumns) {
+  // a and b: a rectified pair (identity rotations, centres 1 apart along x,
+  // one camera: f = 8, so disparity = 8 / z); c is 1 below a: no partner.
+  dispmvs::testing::ModelBuilder builder;
+  const auto camera = builder.AddPinholeCamera(kWidth, kHeight, 8, 8, 4, 3);
+  const Eigen::Matrix3d I = Eigen::Matrix3d::Identity();
+  const auto a = builder.AddImageWithPose(camera, "a.png", I, Eigen::Vector3d::Zero());
+  const auto b = builder.AddImageWithPose(camera, "b.png", I, Eigen::Vector3d(-1, 0, 0));
+  const auto c = builder.AddImageWithPose(camera, "c.png", I, Eigen::Vector3d(0, -1, 0));
+  builder.AddPoint({0.5, 0, 3}, {a, b, c});
+  colmap_io::WriteSparseModelBinary(builder.model(), ws_ / "sparse");
+  gt_["c.png"] = DenseArray(kWidth, kHeight, 1, 3.0f);
+  colmap_io::WriteDenseArray(gt_["c.png"], ws_ / "ground_truth" / "depth_maps" / "c.png.bin");
+
+  // "stereo": a's disparity off by 0.5, 1.5 and 3 px in column pairs 0-1,
+  // 2-3, 4-5, nothing in 6-7; b and c exact.
+  const auto shifted = [](float depth, double shift) {
+    return static_cast<float>(8.0 / (8.0 / depth + shift));
+  };
+  const DenseArray& gt_a = gt_["a.png"];
+  DenseArray stereo_a(kWidth, kHeight, 1, 0.0f);
+  const double shifts[] = {0.5, 1.5, 3.0};
+  for (int r = 0; r < kHeight; ++r) {
+    for (int col = 0; col < 6; ++col) stereo_a.at(r, col) = shifted(gt_a.at(r, col), shifts[col / 2]);
+  }
+  WriteMap("a.png", "stereo", stereo_a);
+  WriteMap("b.png", "stereo", gt_["b.png"]);
+  WriteMap("c.png", "stereo", gt_["c.png"]);
+  // "half" (4x3 maps): a's off by 1.5 px at the GT's resolution (0.75 px of
+  // the map's own), b's exact (from the fixture).
+  DenseArray half_a(kWidth / 2, kHeight / 2, 1);
+  for (int r = 0; r < kHeight / 2; ++r) {
+    for (int col = 0; col < kWidth / 2; ++col) half_a.at(r, col) = shifted(gt_a.at(2 * r, 2 * col), 1.5);
+  }
+  WriteMap("a.png", "half", half_a);
+
+  const fs::path json = dir_.path() / "r.json";
+  const fs::path tsv = dir_.path() / "r.tsv";
+  const RunResult run = RunEval(dir_, Ws() + " --types stereo,half,photometric --per_view --json '" +
+                                          json.string() + "' --tsv '" + tsv.string() + "'");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  const std::vector<std::string> lines = Lines(run.out);
+  ASSERT_EQ(lines.size(), 15u) << run.out;
+  EXPECT_EQ(lines[1], "depth maps vs ground truth: 3 of 3 images have ground truth");
+  EXPECT_EQ(lines[3],
+            "(disparity, over the 2 view(s) with a rectified partner: disp_err = mean "
+            "|f B / d - f B / gt| in GT pixels; <Npx: error < N px)");
+  const std::vector<std::string> header = Cells(lines[4]);
+  ASSERT_EQ(header.size(), 16u) << lines[4];
+  EXPECT_EQ(std::vector<std::string>(header.begin() + 11, header.end()),
+            (std::vector<std::string>{"disp_err", "<1pxpred", "<2pxpred", "<1pxall", "<2pxall"}));
+  const auto disparity_cells = [&](int line) {
+    const std::vector<std::string> cells = Cells(lines[line]);
+    if (cells.size() < 5) return cells;
+    return std::vector<std::string>(cells.end() - 5, cells.end());
+  };
+  using Strings = std::vector<std::string>;
+  // stereo over a and b: 96 GT pixels, 84 predicted; errors 0.5 (12 px),
+  // 1.5 (12), 3 (12) and 0 (48): mean 60 / 84, < 1 px 60, < 2 px 72.
+  EXPECT_EQ(Cells(lines[5])[0], "stereo");
+  EXPECT_EQ(Cells(lines[5])[1], "3/3");
+  EXPECT_EQ(disparity_cells(5), (Strings{"0.714", "71.43%", "85.71%", "62.50%", "75.00%"}));
+  EXPECT_EQ(disparity_cells(6), (Strings{"1.667", "33.33%", "66.67%", "25.00%", "50.00%"}));
+  EXPECT_EQ(disparity_cells(7), (Strings{"0.000", "100.00%", "100.00%", "100.00%", "100.00%"}));
+  EXPECT_EQ(Cells(lines[8])[0], "c.png");
+  EXPECT_EQ(disparity_cells(8), (Strings{"n/a", "n/a", "n/a", "n/a", "n/a"}));
+  // half: errors in GT pixels, 1.5 for a's 12 pixels, 0 for b's.
+  EXPECT_EQ(Cells(lines[9])[1], "2/3");
+  EXPECT_EQ(disparity_cells(9), (Strings{"0.750", "50.00%", "100.00%", "50.00%", "100.00%"}));
+  EXPECT_EQ(disparity_cells(10), (Strings{"1.500", "0.00%", "100.00%", "0.00%", "100.00%"}));
+  EXPECT_EQ(lines[12], "photometric  no maps");
+
+  // JSON: the same, unrounded; null without a partner.
+  const std::string text = ReadFileBytes(json);
+  EXPECT_EQ(JsonNumberAfter(text, "views_with_rectified_partner"), 2);
+  EXPECT_EQ(JsonNumberAfter(text, "disparity_views"), 2);
+  EXPECT_EQ(JsonNumberAfter(text, "disparity_gt_pixels"), 96);
+  EXPECT_EQ(JsonNumberAfter(text, "disparity_predicted_pixels"), 84);
+  EXPECT_NEAR(JsonNumberAfter(text, "disparity_mean_error"), 60.0 / 84, 1e-6);
+  EXPECT_NEAR(JsonNumberAfter(text, "disparity_within_1px_of_predicted"), 60.0 / 84, 1e-9);
+  EXPECT_NEAR(JsonNumberAfter(text, "disparity_within_2px_of_gt"), 0.75, 1e-9);
+  const std::size_t view_a = text.find("\"image\": \"a.png\"");
+  ASSERT_NE(view_a, std::string::npos);
+  EXPECT_EQ(text.compare(text.find("\"rectified_partner\"", view_a),
+                         std::string("\"rectified_partner\": \"b.png\"").size(),
+                         "\"rectified_partner\": \"b.png\""),
+            0);
+  EXPECT_NEAR(JsonNumberFrom(text, view_a, "baseline"), 1.0, 1e-12);
+  EXPECT_EQ(JsonNumberFrom(text, view_a, "disparity_focal"), 8);
+  EXPECT_NEAR(JsonNumberFrom(text, view_a, "disparity_mean_error"), 5.0 / 3, 1e-6);
+  const std::size_t view_c = text.find("\"image\": \"c.png\"");
+  ASSERT_NE(view_c, std::string::npos);
+  EXPECT_EQ(text.find("\"rectified_partner\": null", view_c),
+            text.find("\"rectified_partner\"", view_c));
+  EXPECT_EQ(text.find("\"disparity_gt_pixels\": null", view_c),
+            text.find("\"disparity_gt_pixels\"", view_c));
+  EXPECT_EQ(text.find("\"disparity_within_2px_of_gt\": null", view_c),
+            text.find("\"disparity_within_2px_of_gt\"", view_c));
+
+  // TSV: the sums; the disparity counts cover a and b only.
+  const std::vector<std::string> tsv_lines = Lines(ReadFileBytes(tsv));
+  std::vector<std::vector<std::string>> depth;
+  for (const std::string& line : tsv_lines) {
+    if (line.rfind("depth\t", 0) == 0) depth.push_back(Fields(line));
+  }
+  ASSERT_EQ(depth.size(), 3u);
+  EXPECT_EQ(depth[0][1], "stereo");
+  EXPECT_EQ(depth[0][2], "3");
+  EXPECT_EQ(depth[0][3], "144");
+  EXPECT_EQ(depth[0][4], "132");
+  EXPECT_EQ(std::vector<std::string>(depth[0].begin() + 9, depth[0].end()),
+            (Strings{"96", "60", "72"}));
+  EXPECT_EQ(std::vector<std::string>(depth[1].begin() + 9, depth[1].end()),
+            (Strings{"24", "12", "24"}));
+  EXPECT_EQ(depth[2], (Strings{"depth", "photometric", "0", "0", "0", "0", "0", "0", "0", "0",
+                               "0", "0"}));
+}
+
+TEST_F(EvalCliTest, TsvAgreesWithJson) {
+  const std::vector<colmap_io::PlyPoint> gt = {{{0, 0, 0}}, {{1, 0, 0}}, {{0, 1, 0}}, {{0, 0, 1}}};
+  const std::vector<colmap_io::PlyPoint> recon = {{{0, 0, 0}}, {{1, 0, 0}}, {{0.5f, 0.5f, 0.5f}}};
+  colmap_io::WritePlyPoints(gt, ws_ / "ground_truth" / "points.ply");
+  colmap_io::WritePlyPoints(recon, ws_ / "fused.ply");
+  const std::string fused = (ws_ / "fused.ply").string();
+  const fs::path json = dir_.path() / "s.json";
+  const fs::path tsv = dir_.path() / "deep" / "s.tsv";
+  const RunResult run = RunEval(dir_, Ws() + " --ply '" + fused + "' --json '" + json.string() +
+                                          "' --tsv '" + tsv.string() + "'");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  EXPECT_NE(run.out.find("\ntsv: " + tsv.string() + "\n"), std::string::npos) << run.out;
+  for (const auto& entry : fs::directory_iterator(tsv.parent_path())) {
+    EXPECT_EQ(entry.path().filename(), "s.tsv");  // no temporary left behind
+  }
+  const std::string text = ReadFileBytes(json);
+  const std::string table = ReadFileBytes(tsv);
+  ASSERT_FALSE(table.empty());
+  EXPECT_EQ(table.back(), '\n');
+
+  int depth_headers = 0, cloud_headers = 0, depth_rows = 0, cloud_rows = 0;
+  for (const std::string& line : Lines(table)) {
+    ASSERT_FALSE(line.empty());
+    const std::vector<std::string> f = Fields(line);
+    if (line[0] == '#') {
+      if (f[0] == "#depth") {
+        ++depth_headers;
+        EXPECT_EQ(line, "#depth\ttype\tviews\tgt_pixels\tpredicted\twithin_1\twithin_2\t"
+                        "within_5\tabs_rel_sum\tdisparity_gt_pixels\tdisparity_within_1px\t"
+                        "disparity_within_2px");
+        EXPECT_EQ(depth_rows, 0);  // before the rows
+      } else if (f[0] == "#cloud") {
+        ++cloud_headers;
+        EXPECT_EQ(line, "#cloud\tply\tpoints\tgt_points\taccuracy\tcompleteness\toverall\t"
+                        "precision\trecall\tfscore\ttau\tcutoff");
+        EXPECT_EQ(cloud_rows, 0);
+      }
+      continue;
+    }
+    if (f[0] == "depth") {
+      ++depth_rows;
+      ASSERT_EQ(f.size(), 12u) << line;
+      const std::size_t at = text.find("\"type\": \"" + f[1] + "\"");
+      ASSERT_NE(at, std::string::npos) << f[1];
+      EXPECT_EQ(std::stod(f[2]), JsonNumberFrom(text, at, "views")) << line;
+      const double gt_pixels = std::stod(f[3]);
+      const double predicted = std::stod(f[4]);
+      EXPECT_EQ(gt_pixels, JsonNumberFrom(text, at, "gt_pixels")) << line;
+      EXPECT_EQ(predicted, JsonNumberFrom(text, at, "predicted_pixels")) << line;
+      ExpectClose(predicted / gt_pixels, JsonNumberFrom(text, at, "coverage"), line);
+      ExpectClose(std::stod(f[5]) / gt_pixels, JsonNumberFrom(text, at, "within_1_of_gt"), line);
+      ExpectClose(std::stod(f[6]) / gt_pixels, JsonNumberFrom(text, at, "within_2_of_gt"), line);
+      ExpectClose(std::stod(f[7]) / gt_pixels, JsonNumberFrom(text, at, "within_5_of_gt"), line);
+      ExpectClose(std::stod(f[6]) / predicted, JsonNumberFrom(text, at, "within_2_of_predicted"),
+                  line);
+      ExpectClose(std::stod(f[8]) / predicted, JsonNumberFrom(text, at, "abs_rel"), line);
+      // No rectified pair in this workspace.
+      EXPECT_EQ(std::vector<std::string>(f.begin() + 9, f.end()),
+                (std::vector<std::string>{"0", "0", "0"}));
+    } else if (f[0] == "cloud") {
+      ++cloud_rows;
+      ASSERT_EQ(f.size(), 12u) << line;
+      EXPECT_EQ(f[1], fused);
+      const std::size_t at = text.find("\"ply\": ");
+      ASSERT_NE(at, std::string::npos);
+      EXPECT_EQ(f[2], "3");
+      EXPECT_EQ(f[3], "4");
+      const char* keys[] = {"accuracy", "completeness", "overall", "precision",
+                            "recall",   "fscore",       "tau",     "cutoff"};
+      for (int i = 0; i < 8; ++i) {
+        ExpectClose(std::stod(f[4 + i]), JsonNumberFrom(text, at, keys[i]), keys[i]);
+      }
+      ExpectClose(std::stod(f[9]), 4.0 / 7.0, "fscore");
+    } else {
+      ADD_FAILURE() << "unexpected line: " << line;
+    }
+  }
+  EXPECT_EQ(depth_headers, 1);
+  EXPECT_EQ(cloud_headers, 1);
+  EXPECT_EQ(depth_rows, 3);  // dispmvs.geometric, geometric, half
+  EXPECT_EQ(cloud_rows, 1);
+  // Exact sums: dispmvs.geometric's abs_rel_sum is 48 pixels of rel. error
+  // 0.015 (float rounding aside), printed with 17 digits.
+  const std::size_t row = table.find("depth\tdispmvs.geometric\t2\t96\t48\t0\t48\t48\t");
+  ASSERT_NE(row, std::string::npos) << table;
+  const std::string abs_rel_sum = Fields(table.substr(row, table.find('\n', row) - row))[8];
+  EXPECT_NEAR(std::stod(abs_rel_sum), 48 * 0.015, 1e-5);
+  EXPECT_GE(abs_rel_sum.size(), 15u) << abs_rel_sum;
+}
+
 TEST_F(EvalCliTest, HelpAndErrors) {
   RunResult run = RunEval(dir_, "--help");
   EXPECT_EQ(run.status, 0);
   EXPECT_NE(run.out.find("Usage: dispmvs_eval --workspace_path WS"), std::string::npos);
   EXPECT_NE(run.out.find("--png_dir"), std::string::npos);
+  EXPECT_NE(run.out.find("--tsv FILE writes a summary"), std::string::npos);
+  EXPECT_NE(run.out.find("depth TYPE views gt_pixels predicted within_1 within_2 within_5 "
+                         "abs_rel_sum"),
+            std::string::npos);
+  EXPECT_NE(run.out.find("cloud PLY points gt_points accuracy completeness overall precision "
+                         "recall"),
+            std::string::npos);
 
   ExpectError(RunEval(dir_, ""), "--workspace_path is required");
   ExpectError(RunEval(dir_, "--workspace_path '" + (dir_.path() / "nope").string() + "'"),
@@ -342,6 +594,13 @@ TEST_F(EvalCliTest, HelpAndErrors) {
               "no depth map of type(s) photometric, geometric.x for any image with ground truth");
   ExpectError(RunEval(dir_, Ws() + " --ply '" + (dir_.path() / "missing.ply").string() + "'"),
               "missing.ply: no such file");
+  ExpectError(RunEval(dir_, Ws() + " --tsv ''"), "--tsv needs a file name");
+  ExpectError(RunEval(dir_, Ws() + " --ply 'a\tb.ply' --tsv x.tsv"),
+              "contains a tab or a line break, which --tsv cannot hold");
+  // A TSV path under a regular file cannot be written.
+  WriteFileBytes(dir_.path() / "plain", "x");
+  ExpectError(RunEval(dir_, Ws() + " --tsv '" + (dir_.path() / "plain" / "s.tsv").string() + "'"),
+              "s.tsv");
 
   // A map whose size is not a clean scale of the GT.
   WriteMap("b.png", "bad", DenseArray(6, 3, 1, 1.0f));

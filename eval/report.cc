@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <sstream>
+#include <stdexcept>
 #include <vector>
 
 #include "colmap_io/atomic_file.h"
@@ -66,6 +67,33 @@ Row MetricCells(const std::string& name, const std::string& views, const DepthMe
           Percent(m.within_1_of_gt),
           Percent(m.within_2_of_gt),
           Percent(m.within_5_of_gt)};
+}
+
+// Not applicable (no rectified partner) comes out as "n/a": every value is NaN.
+void AppendDisparityCells(const DisparityMetrics& m, Row* row) {
+  row->insert(row->end(), {Format("%.3f", m.mean_error), Percent(m.within_1px_of_predicted),
+                           Percent(m.within_2px_of_predicted), Percent(m.within_1px_of_gt),
+                           Percent(m.within_2px_of_gt)});
+}
+
+// ---- TSV ----
+
+// Exact and round-trippable: 17 significant digits, "nan" for NaN.
+std::string TsvNumber(double value) {
+  if (std::isnan(value)) return "nan";
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.17g", value);
+  return buffer;
+}
+
+// A field must not contain the separators of the format.
+const std::string& TsvField(const std::string& text, const char* what) {
+  if (text.find_first_of("\t\n\r") != std::string::npos) {
+    throw std::invalid_argument(std::string(what) + " \"" + text +
+                                "\" contains a tab or a line break and cannot be written to the "
+                                "TSV file");
+  }
+  return text;
 }
 
 // ---- JSON ----
@@ -132,6 +160,19 @@ std::string JsonArray(const std::vector<std::string>& items, int indent) {
   return out + std::string(indent, ' ') + "]";
 }
 
+void AddDisparityMetrics(const DisparityMetrics& m, JsonObject* object) {
+  const auto count = [&](int64_t value) {
+    return m.applicable ? JsonNumber(value) : std::string("null");
+  };
+  object->Add("disparity_gt_pixels", count(m.gt_pixels))
+      .Add("disparity_predicted_pixels", count(m.predicted))
+      .Add("disparity_mean_error", JsonNumber(m.mean_error))
+      .Add("disparity_within_1px_of_predicted", JsonNumber(m.within_1px_of_predicted))
+      .Add("disparity_within_2px_of_predicted", JsonNumber(m.within_2px_of_predicted))
+      .Add("disparity_within_1px_of_gt", JsonNumber(m.within_1px_of_gt))
+      .Add("disparity_within_2px_of_gt", JsonNumber(m.within_2px_of_gt));
+}
+
 void AddMetrics(const DepthMetrics& m, JsonObject* object) {
   object->Add("gt_pixels", JsonNumber(m.gt_pixels))
       .Add("predicted_pixels", JsonNumber(m.predicted))
@@ -154,9 +195,20 @@ void PrintReport(const WorkspaceEvalReport& report, bool per_view, std::ostream&
   out << "depth maps vs ground truth: " << report.views_with_gt << " of " << report.num_images
       << " images have ground truth\n";
   out << "(pred: of the GT pixels with a prediction; all: of all GT pixels)\n";
+  // Without any rectified pair the table keeps its original columns.
+  const bool disparity = report.views_with_rectified_partner > 0;
+  if (disparity) {
+    out << "(disparity, over the " << report.views_with_rectified_partner
+        << " view(s) with a rectified partner: disp_err = mean |f B / d - f B / gt| in GT "
+           "pixels; <Npx: error < N px)\n";
+  }
   std::vector<Row> rows;
   rows.push_back({"type", "views", "coverage", "abs_rel", "med_rel", "<1%pred", "<2%pred",
                   "<5%pred", "<1%all", "<2%all", "<5%all"});
+  if (disparity) {
+    rows.back().insert(rows.back().end(),
+                       {"disp_err", "<1pxpred", "<2pxpred", "<1pxall", "<2pxall"});
+  }
   std::vector<std::string> notes;
   for (const TypeDepthResult& type : report.types) {
     if (!type.evaluated()) {
@@ -168,9 +220,11 @@ void PrintReport(const WorkspaceEvalReport& report, bool per_view, std::ostream&
           type.type,
           std::to_string(type.views.size()) + "/" + std::to_string(report.views_with_gt),
           type.overall));
+      if (disparity) AppendDisparityCells(type.disparity_overall, &rows.back());
       if (per_view) {
         for (const ViewDepthResult& view : type.views) {
           rows.push_back(MetricCells("  " + view.image_name, "", view.metrics));
+          if (disparity) AppendDisparityCells(view.disparity, &rows.back());
         }
       }
     }
@@ -223,16 +277,20 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
   JsonObject root(0);
   root.Add("workspace", JsonString(report.workspace))
       .Add("num_images", JsonNumber(static_cast<int64_t>(report.num_images)))
-      .Add("views_with_gt", JsonNumber(static_cast<int64_t>(report.views_with_gt)));
+      .Add("views_with_gt", JsonNumber(static_cast<int64_t>(report.views_with_gt)))
+      .Add("views_with_rectified_partner",
+           JsonNumber(static_cast<int64_t>(report.views_with_rectified_partner)));
   std::vector<std::string> types;
   for (const TypeDepthResult& type : report.types) {
     JsonObject object(4);
     object.Add("type", JsonString(type.type))
         .Add("views", JsonNumber(static_cast<int64_t>(type.views.size())))
-        .Add("maps_without_gt", JsonNumber(type.maps_without_gt));
+        .Add("maps_without_gt", JsonNumber(type.maps_without_gt))
+        .Add("disparity_views", JsonNumber(type.disparity_sums.views));
     if (type.evaluated()) {
       JsonObject overall(6);
       AddMetrics(type.overall, &overall);
+      AddDisparityMetrics(type.disparity_overall, &overall);
       object.Add("overall", overall.str());
     } else {
       object.Add("overall", "null");
@@ -245,7 +303,16 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
           .Add("height", JsonNumber(static_cast<int64_t>(view.height)))
           .Add("gt_width", JsonNumber(static_cast<int64_t>(view.gt_width)))
           .Add("gt_height", JsonNumber(static_cast<int64_t>(view.gt_height)));
+      if (view.disparity_geometry) {
+        const DisparityGeometry& geometry = *view.disparity_geometry;
+        v.Add("rectified_partner", JsonString(geometry.partner.name))
+            .Add("baseline", JsonNumber(geometry.partner.baseline))
+            .Add("disparity_focal", JsonNumber(geometry.focal));
+      } else {
+        v.Add("rectified_partner", "null").Add("baseline", "null").Add("disparity_focal", "null");
+      }
       AddMetrics(view.metrics, &v);
+      AddDisparityMetrics(view.disparity, &v);
       views.push_back(v.str());
     }
     object.Add("per_view", JsonArray(views, 6));
@@ -294,6 +361,46 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
 void WriteJsonReport(const WorkspaceEvalReport& report, const std::filesystem::path& path) {
   const std::string json = ReportToJson(report);
   colmap_io::WriteFileAtomically(path, [&](std::ostream& out) { out << json; });
+}
+
+std::string ReportToTsv(const WorkspaceEvalReport& report) {
+  std::string workspace = report.workspace;
+  for (char& c : workspace) {
+    if (c == '\n' || c == '\r') c = ' ';  // it is only a comment
+  }
+  std::string out = "# dispmvs_eval summary of " + workspace + "\n";
+  out += "# counts are pixel counts summed over the views; abs_rel_sum is the sum of |d - gt| / "
+         "gt over the predicted pixels\n";
+  out += std::string("#depth\ttype\tviews\tgt_pixels\tpredicted\twithin_1\twithin_2\twithin_5\t") +
+         "abs_rel_sum\tdisparity_gt_pixels\tdisparity_within_1px\tdisparity_within_2px\n";
+  for (const TypeDepthResult& type : report.types) {
+    const DepthMetricSums& s = type.sums;
+    const DisparityMetricSums& d = type.disparity_sums;
+    out += "depth\t" + TsvField(type.type, "depth-map type") + "\t" +
+           std::to_string(type.views.size()) + "\t" + std::to_string(s.gt_pixels) + "\t" +
+           std::to_string(s.predicted) + "\t" + std::to_string(s.within_1) + "\t" +
+           std::to_string(s.within_2) + "\t" + std::to_string(s.within_5) + "\t" +
+           TsvNumber(s.abs_rel_sum) + "\t" + std::to_string(d.gt_pixels) + "\t" +
+           std::to_string(d.within_1px) + "\t" + std::to_string(d.within_2px) + "\n";
+  }
+  out += "#cloud\tply\tpoints\tgt_points\taccuracy\tcompleteness\toverall\tprecision\trecall\t"
+         "fscore\ttau\tcutoff\n";
+  for (const CloudResult& cloud : report.clouds) {
+    const CloudMetrics& m = cloud.metrics;
+    out += "cloud\t" + TsvField(cloud.ply_path, "point-cloud path") + "\t" +
+           std::to_string(m.num_points) + "\t" + std::to_string(m.num_gt_points);
+    for (const double value :
+         {m.accuracy, m.completeness, m.overall, m.precision, m.recall, m.fscore, m.tau, m.cutoff}) {
+      out += "\t" + TsvNumber(value);
+    }
+    out += "\n";
+  }
+  return out;
+}
+
+void WriteTsvReport(const WorkspaceEvalReport& report, const std::filesystem::path& path) {
+  const std::string tsv = ReportToTsv(report);
+  colmap_io::WriteFileAtomically(path, [&](std::ostream& out) { out << tsv; });
 }
 
 }  // namespace dispmvs::eval

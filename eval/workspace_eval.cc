@@ -201,6 +201,7 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
 
   // Depth maps, view by view (each GT read once).
   std::vector<DepthMetricSums> type_sums(types.size());
+  std::vector<DisparityMetricSums> type_disparity_sums(types.size());
   PointCloud gt_cloud;
   const bool write_png = !options.png_dir.empty();
   for (const colmap_io::Image* image : gt_images) {
@@ -215,6 +216,14 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
                                           SizeText(gt.width(), gt.height()) +
                                           " but its camera is " +
                                           SizeText(camera.width, camera.height));
+    }
+    std::optional<DisparityGeometry> disparity_geometry;
+    if (std::optional<RectifiedPartner> partner = FindRectifiedPartner(model, image->image_id)) {
+      // Disparity in pixels of the GT's resolution, whatever the map's.
+      const double focal = camera.CalibrationMatrix()(0, 0) * gt.width() /
+                           static_cast<double>(camera.width);
+      disparity_geometry = DisparityGeometry{std::move(*partner), focal};
+      ++report.views_with_rectified_partner;
     }
     if (gt_cloud_from_maps) {
       try {
@@ -236,8 +245,13 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
       const colmap_io::DenseArray map = ReadDepthMap(map_path, "depth map");
       cv::Mat rel_error;
       DepthMetricSums sums;
+      DisparityMetricSums disparity_sums;
       try {
         sums = SumDepthMetrics(map, gt, write_png ? &rel_error : nullptr);
+        if (disparity_geometry) {
+          disparity_sums = SumDisparityMetrics(
+              map, gt, disparity_geometry->focal * disparity_geometry->partner.baseline);
+        }
       } catch (const std::invalid_argument& error) {
         throw IoError(map_path.string(), error.what());
       }
@@ -255,12 +269,18 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
       view.gt_width = gt.width();
       view.gt_height = gt.height();
       view.metrics = Finalize(sums);
+      view.disparity_geometry = disparity_geometry;
+      view.disparity = Finalize(disparity_sums);
       report.types[t].views.push_back(std::move(view));
       type_sums[t] += sums;
+      type_disparity_sums[t] += disparity_sums;
     }
   }
   for (std::size_t t = 0; t < types.size(); ++t) {
     report.types[t].overall = Finalize(type_sums[t]);
+    report.types[t].disparity_overall = Finalize(type_disparity_sums[t]);
+    report.types[t].sums = std::move(type_sums[t]);
+    report.types[t].disparity_sums = type_disparity_sums[t];
   }
 
   if (!evaluate_clouds) return report;

@@ -12,6 +12,9 @@
 // Images are those of the sparse model, in name order. A GT map must be the
 // size of its camera (or a clean down-scale of it); a depth map must be a
 // clean down-scale of its GT map (depth_metrics.h has the pixel convention).
+// An image with GT that forms a rectified pair with another registered image
+// (rectified_pair.h) is also scored in disparity (depth_metrics.h), with its
+// partner's baseline.
 
 #include <cstdint>
 #include <filesystem>
@@ -23,6 +26,7 @@
 #include "colmap_io/workspace.h"
 #include "eval/cloud_metrics.h"
 #include "eval/depth_metrics.h"
+#include "eval/rectified_pair.h"
 
 namespace dispmvs::eval {
 
@@ -49,11 +53,20 @@ struct WorkspaceEvalOptions {
   void Check() const;  // std::invalid_argument naming the field
 };
 
+// The rectified partner of an image with GT (rectified_pair.h) and the
+// factor that turns its depth into disparity in GT pixels.
+struct DisparityGeometry {
+  RectifiedPartner partner;
+  double focal = 0;  // the camera's fx scaled to the GT map's width
+};
+
 struct ViewDepthResult {
   std::string image_name;
   int width = 0, height = 0;        // the depth map's
   int gt_width = 0, gt_height = 0;  // the GT map's
   DepthMetrics metrics;
+  std::optional<DisparityGeometry> disparity_geometry;  // none: no rectified partner
+  DisparityMetrics disparity;                           // not applicable without one
 };
 
 struct TypeDepthResult {
@@ -61,6 +74,12 @@ struct TypeDepthResult {
   std::vector<ViewDepthResult> views;  // images with GT and a map of this type
   int64_t maps_without_gt = 0;         // maps of images without GT (not scored)
   DepthMetrics overall;                // pixel-weighted over `views`
+  // The pixel-weighted disparity numbers of the views that have a rectified
+  // partner (not applicable when none has).
+  DisparityMetrics disparity_overall;
+  // The raw sums behind `overall` and `disparity_overall` (the TSV report).
+  DepthMetricSums sums;
+  DisparityMetricSums disparity_sums;
   bool evaluated() const { return !views.empty(); }
 };
 
@@ -84,6 +103,7 @@ struct WorkspaceEvalReport {
   std::string workspace;
   int num_images = 0;       // registered images of the sparse model
   int views_with_gt = 0;    // ... with a GT depth map
+  int views_with_rectified_partner = 0;  // ... of those, with a rectified partner
   std::vector<TypeDepthResult> types;
   std::optional<GtCloudInfo> gt_cloud;  // when ply_paths was not empty
   std::vector<CloudResult> clouds;
