@@ -65,7 +65,8 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Sparse points drawn per view (before the two-view visibility test).")
       ("texture_dir", po::value<std::string>(&options.texture_dir),
        "Folder of photographs (png, jpg, ...) used as textures besides the procedural ones, "
-       "e.g. /usr/share/backgrounds/gnome from Debian's gnome-backgrounds.")
+       "e.g. the photos of Debian's python3-skimage data folder (leave out motorcycle_*: "
+       "bench/motorcycle_check.sh evaluates on them).")
       ("photo_probability", po::value<double>(&config.photo_probability)->default_value(config.photo_probability, "0.5"),
        "With --texture_dir: the share of textures that are photos.")
       ("ply_stride", po::value<int>(&options.workspace.ply_stride)->default_value(options.workspace.ply_stride),

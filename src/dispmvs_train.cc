@@ -43,7 +43,8 @@ options (default):
                               folder of scans); validation stays on generated scenes (none)
   --mvsnet_fraction F         share of samples drawn from that data set, the rest generated (1)
   --texture_dir DIR           photographs for photo textures of the training scenes (png, jpg, ...;
-                              e.g. apt-get install gnome-backgrounds: /usr/share/backgrounds/gnome);
+                              e.g. the photos of Debian's python3-skimage data folder, without
+                              motorcycle_*, which bench/motorcycle_check.sh evaluates on);
                               validation stays procedural (none)
   --photo_probability P       share of textures that are photos, with --texture_dir (0.5)
   --init_weights FILE         start from these weights (e.g. models/dispmvs_small.safetensors,

@@ -1,7 +1,9 @@
 #pragma once
-// Photographs from a folder for photo textures (texture.h): e.g. a wallpaper
-// package (`apt-get install gnome-backgrounds`: /usr/share/backgrounds) or
-// any folder of the user's pictures.
+// Photographs from a folder for photo textures (texture.h): any folder of
+// the user's pictures, e.g. the photos in Debian's python3-skimage data folder
+// (astronaut, chelsea, coffee, ...; not motorcycle_*, which
+// bench/motorcycle_check.sh evaluates on), or a wallpaper package
+// (gnome-backgrounds: mostly .webp graphics).
 //
 // Decoding needs OpenCV, which the LibTorch-only build (a bare GPU machine)
 // lacks: there LoadPhotoFolder throws, saying so, and only procedural
