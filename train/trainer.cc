@@ -201,14 +201,24 @@ std::vector<int64_t> CompleteCheckpoints(const fs::path& dir) {
   return steps;
 }
 
-// The data set as a setting: its absolute path, so that a resumed run may
-// name it relative to another working directory.
-std::string MvsnetRootSetting(const std::string& root) {
+// A folder (data set, photos) as a setting: its absolute path, so that a
+// resumed run may name it relative to another working directory.
+std::string AbsolutePathSetting(const std::string& root) {
   if (root.empty()) return "";
   std::error_code error;
   const fs::path canonical = fs::weakly_canonical(fs::absolute(root), error);
   return (error ? fs::absolute(root).lexically_normal() : canonical).string();
 }
+
+// 64-bit FNV-1a: a stable fingerprint (not a security hash) of what a
+// setting names.
+struct Fnv1a64 {
+  uint64_t value = 14695981039346656037ull;
+  void Add(const char* data, size_t size) {
+    for (size_t i = 0; i < size; ++i) value = (value ^ static_cast<unsigned char>(data[i])) * 1099511628211ull;
+  }
+  void Add(const std::string& text) { Add(text.data(), text.size()); }
+};
 
 // A weights file as a run setting: its size and a 64-bit FNV-1a hash of its
 // bytes, so that the same weights under another path resume, and other
@@ -217,18 +227,16 @@ std::string InitWeightsSetting(const std::string& path) {
   if (path.empty()) return "";
   std::ifstream file(path, std::ios::binary);
   if (!file) throw std::invalid_argument("init_weights: cannot read " + path);
-  uint64_t hash = 14695981039346656037ull;
+  Fnv1a64 hash;
   uint64_t size = 0;
   char buffer[1 << 16];
   while (file.read(buffer, sizeof buffer) || file.gcount() > 0) {
-    for (std::streamsize i = 0; i < file.gcount(); ++i) {
-      hash = (hash ^ static_cast<unsigned char>(buffer[i])) * 1099511628211ull;
-    }
+    hash.Add(buffer, static_cast<size_t>(file.gcount()));
     size += static_cast<uint64_t>(file.gcount());
   }
   char text[64];
   std::snprintf(text, sizeof text, "%llu bytes, fnv1a64 %016llx",
-                static_cast<unsigned long long>(size), static_cast<unsigned long long>(hash));
+                static_cast<unsigned long long>(size), static_cast<unsigned long long>(hash.value));
   return text;
 }
 
@@ -241,20 +249,20 @@ std::string TextureDirSetting(const std::string& dir) {
     if (entry.is_regular_file()) files.emplace_back(entry.path().filename().string(), entry.file_size());
   }
   std::sort(files.begin(), files.end());
-  uint64_t hash = 14695981039346656037ull;
-  const auto mix = [&](const std::string& text) {
-    for (const char c : text) hash = (hash ^ static_cast<unsigned char>(c)) * 1099511628211ull;
-  };
-  for (const auto& [name, size] : files) mix(name + "\n" + std::to_string(size) + "\n");
+  Fnv1a64 hash;
+  for (const auto& [name, size] : files) hash.Add(name + "\n" + std::to_string(size) + "\n");
   char text[40];
   std::snprintf(text, sizeof text, " (%zu files, fnv1a64 %016llx)", files.size(),
-                static_cast<unsigned long long>(hash));
-  return MvsnetRootSetting(dir) + text;
+                static_cast<unsigned long long>(hash.value));
+  return AbsolutePathSetting(dir) + text;
 }
 
 // The settings that change what a step computes: a checkpoint can only be
 // resumed by a run with the same ones (the total step count may differ).
-std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
+// Computed once per run (they read the init weights and list the photo
+// folder), then passed to every checkpoint.
+using Settings = std::map<std::string, std::string>;
+Settings RunSettings(const TrainOptions& o) {
   std::ostringstream lr, clip, widening;
   lr.precision(17);
   clip.precision(17);
@@ -275,7 +283,7 @@ std::map<std::string, std::string> RunSettings(const TrainOptions& o) {
           {"lr_halve_every", std::to_string(o.lr_halve_every)},
           {"grad_clip", clip.str()},
           {"train_widening_max", widening.str()},
-          {"mvsnet_root", MvsnetRootSetting(o.mvsnet_root)},
+          {"mvsnet_root", AbsolutePathSetting(o.mvsnet_root)},
           {"mvsnet_fraction", mvsnet_fraction.str()},
           {"init_weights", InitWeightsSetting(o.init_weights)},
           {"texture_dir", TextureDirSetting(o.texture_dir)},
@@ -299,7 +307,7 @@ std::string AdamStateKey(const torch::Tensor& parameter) {
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,
-                    torch::optim::Adam& optimizer, const TrainOptions& options) {
+                    torch::optim::Adam& optimizer, const Settings& settings) {
   model::NamedTensors tensors;
   int64_t adam_step = -1;
   for (const auto& item : net->named_parameters()) {
@@ -313,7 +321,7 @@ void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const Mo
     tensors.emplace_back("exp_avg/" + item.key(), state.exp_avg());
     tensors.emplace_back("exp_avg_sq/" + item.key(), state.exp_avg_sq());
   }
-  auto metadata = RunSettings(options);
+  Settings metadata = settings;
   metadata["step"] = std::to_string(step);
   metadata["adam_step"] = std::to_string(std::max<int64_t>(adam_step, 0));
   model::SaveSafetensors(OptimPath(dir, step).string(), tensors, metadata);
@@ -327,10 +335,10 @@ void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const Mo
 }
 
 void LoadCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, torch::optim::Adam& optimizer,
-                    const TrainOptions& options, torch::Device device) {
+                    const Settings& settings, torch::Device device) {
   const std::string optim_path = OptimPath(dir, step).string();
   const auto file = model::LoadSafetensors(optim_path);
-  for (const auto& [key, value] : RunSettings(options)) {
+  for (const auto& [key, value] : settings) {
     const auto found = file.metadata.find(key);
     const std::optional<std::string> stored =
         found != file.metadata.end() ? std::optional<std::string>(found->second) : SettingBeforeItExisted(key);
@@ -482,17 +490,18 @@ void Train(const TrainOptions& options, std::ostream& console) {
   net->to(device);
   torch::optim::Adam optimizer(net->parameters(), torch::optim::AdamOptions(options.lr));
 
+  const Settings settings = RunSettings(options);
   int64_t start = 0;
   const auto checkpoints = CompleteCheckpoints(dir);
   if (!checkpoints.empty()) {
     start = checkpoints.back();
-    LoadCheckpoint(dir, start, net, optimizer, options, device);
+    LoadCheckpoint(dir, start, net, optimizer, settings, device);
     log.Line("resumed from " + WeightsPath(dir, start).string() + " at step " + std::to_string(start));
   } else if (!options.init_weights.empty()) {
     // Checked before anything is trained: a mismatch names the tensor.
     model::LoadModuleWeights(*net, options.init_weights);
     log.Line("initialised from " + options.init_weights + " (" +
-             InitWeightsSetting(options.init_weights) + ")");
+             settings.at("init_weights") + ")");
   }
 
   auto synth_config = SynthConfigFor(options);  // of the training samples
@@ -557,7 +566,7 @@ void Train(const TrainOptions& options, std::ostream& console) {
 
     const int64_t done = step + 1;
     if (done % options.checkpoint_every == 0 || done == options.steps) {
-      SaveCheckpoint(dir, done, net, config, optimizer, options);
+      SaveCheckpoint(dir, done, net, config, optimizer, settings);
     }
     if (options.validate_every > 0 && done % options.validate_every == 0) {
       validate(done);
