@@ -83,7 +83,8 @@ constexpr const char* kUsage =
     "with the share of time per stage.\n"
     "  --sizes WxH[,WxH...]     image sizes (default 640x512)\n"
     "  --sources N              source views per reference (default 5)\n"
-    "  --config small,paper     network configurations (default small, the shipped one)\n"
+    "  --config small,paper     network configurations: paper, small (random start) and/or\n"
+    "                           paper_v2, small_v2 (model v2: segment volume, match start) (small)\n"
     "  --coarse_iterations N    override the configuration's GRU iterations (0: keep)\n"
     "  --fine_iterations N      same for the fine stage\n"
     "  --device cpu|cuda|cuda:I (default cpu)\n"
@@ -145,8 +146,8 @@ Options ParseArgs(int argc, char** argv) {
     } else if (flag == "--config") {
       o.configs = SplitComma(value);
       for (const auto& c : o.configs) {
-        if (c != "paper" && c != "small") {
-          throw std::invalid_argument("--config takes paper and/or small, got '" + c + "'");
+        if (c != "paper" && c != "small" && c != "paper_v2" && c != "small_v2") {
+          throw std::invalid_argument("--config takes paper, small, paper_v2 and/or small_v2, got '" + c + "'");
         }
       }
     } else if (flag == "--coarse_iterations") {
@@ -408,7 +409,11 @@ struct Row {
 };
 
 ModelConfig MakeConfig(const std::string& name, const Options& o) {
-  ModelConfig config = name == "paper" ? ModelConfig::Paper() : ModelConfig::Small();
+  ModelConfig config = name.rfind("paper", 0) == 0 ? ModelConfig::Paper() : ModelConfig::Small();
+  if (name.size() > 3 && name.compare(name.size() - 3, 3, "_v2") == 0) {
+    config.init = ModelConfig::Init::kMatch;  // model v2: segment volume, match start
+    config.name = name;
+  }
   if (o.coarse_iterations > 0) config.coarse_iterations = o.coarse_iterations;
   if (o.fine_iterations > 0) config.fine_iterations = o.fine_iterations;
   return config;

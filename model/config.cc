@@ -42,6 +42,7 @@ void RequireAtMost(const char* field, int64_t value, int64_t limit) {
 // with any safetensors tool.
 const char* const kName = "name";
 const char* const kDeformable = "deformable_context_decoder";
+const char* const kInit = "init";
 
 // Calls visit(key, field) for every integer field; Config is ModelConfig or
 // const ModelConfig, so one list serves reading and writing.
@@ -140,11 +141,29 @@ ModelConfig ModelConfig::Small() {
   return c;
 }
 
+ModelConfig ModelConfig::SmallV2() {
+  ModelConfig c = Small();
+  c.name = "small_v2";
+  c.init = Init::kMatch;
+  return c;
+}
+
+const char* InitName(ModelConfig::Init init) {
+  return init == ModelConfig::Init::kMatch ? "match" : "random";
+}
+
+ModelConfig::Init ParseInit(const std::string& text) {
+  if (text == "random") return ModelConfig::Init::kRandom;
+  if (text == "match") return ModelConfig::Init::kMatch;
+  throw std::invalid_argument("ModelConfig: init must be 'random' or 'match', got '" + text + "'");
+}
+
 std::map<std::string, std::string> ModelConfig::ToMetadata() const {
   std::map<std::string, std::string> out;
   out[kName] = name;
   ForEachIntField(*this, [&](const char* key, int64_t value) { out[key] = std::to_string(value); });
   out[kDeformable] = deformable_context_decoder ? "true" : "false";
+  out[kInit] = InitName(init);
   return out;
 }
 
@@ -162,6 +181,9 @@ ModelConfig ModelConfig::FromMetadata(const std::map<std::string, std::string>& 
     throw std::invalid_argument("ModelConfig metadata: key '" + std::string(kDeformable) +
                                 "' must be 'true' or 'false', got '" + deformable + "'");
   }
+  // Optional: weights from before model v2 have no "init" and used kRandom.
+  const auto init = metadata.find(kInit);
+  c.init = init == metadata.end() ? Init::kRandom : ParseInit(init->second);
   c.Check();
   return c;
 }

@@ -37,15 +37,39 @@ struct ModelConfig {
   int64_t coarse_iterations = 8;
   int64_t fine_iterations = 2;
 
+  // How the coarse stage starts (metadata key "init"):
+  //  * kRandom, the paper's: a random inverse depth drawn inside the
+  //    depth-range hint; every coarse iteration samples 2-D source features
+  //    around the current match. Needs a hint.
+  //  * kMatch (model v2): a 1-D correlation volume along each source's whole
+  //    epipolar segment is computed once per stage; the start is the best
+  //    match of each source along it, triangulated and fused; the GRU reads
+  //    the volume. Needs no depth range at all.
+  // Weights written before this field existed were trained with kRandom, so
+  // a file without the key reads as kRandom.
+  enum class Init { kRandom, kMatch };
+  Init init = Init::kRandom;
+
+  // Whether forward() needs DispMvsInput::depth_min/depth_max.
+  bool NeedsDepthRange() const { return init == Init::kRandom; }
+
   // Throws std::invalid_argument naming the first bad field.
   void Check() const;
 
   static ModelConfig Paper();
   static ModelConfig Small();
+  // Small() with init = kMatch: the CPU configuration of model v2.
+  static ModelConfig SmallV2();
 
   std::map<std::string, std::string> ToMetadata() const;
   // Throws std::invalid_argument on a missing or malformed key.
   static ModelConfig FromMetadata(const std::map<std::string, std::string>& metadata);
 };
 
+}  // namespace dispmvs::model
+
+namespace dispmvs::model {
+// "random" / "match", and back (std::invalid_argument on other text).
+const char* InitName(ModelConfig::Init init);
+ModelConfig::Init ParseInit(const std::string& text);
 }  // namespace dispmvs::model

@@ -3,6 +3,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "model/grid_coordinates.h"
+
 namespace dispmvs::model {
 namespace {
 
@@ -27,19 +29,6 @@ void CheckShape(const torch::Tensor& t, const char* name, int64_t batch, int64_t
                                 std::to_string(width) + "], got " +
                                 (t.defined() ? ShapeOf(t) : std::string("undefined")));
   }
-}
-
-// Pixel-index coordinate -> grid_sample coordinate for align_corners=false:
-// pixel index p maps to (2p + 1) / size - 1. align_corners=false is used (with
-// this exact conversion) rather than align_corners=true because the latter
-// cannot address a map of size 1, which coarse pooled levels of small images
-// reach. Non-finite or far-away coordinates are moved to +-3, which is more
-// than one pixel outside any map, so they still read exactly 0 and never
-// reach grid_sample's integer conversion as NaN or overflow.
-torch::Tensor ToGridCoordinate(const torch::Tensor& pixel, int64_t size) {
-  torch::Tensor g = (2.0 * pixel + 1.0) / static_cast<double>(size) - 1.0;
-  g = torch::where(torch::isfinite(g), g, torch::full_like(g, -3.0));
-  return g.clamp(-3.0, 3.0);
 }
 
 }  // namespace

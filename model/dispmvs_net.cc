@@ -1,11 +1,14 @@
 #include "model/dispmvs_net.h"
 
+#include <cmath>
+#include <optional>
 #include <stdexcept>
 #include <string>
 
 #include "model/convex_upsample.h"
 #include "model/correlation.h"
 #include "model/geometry.h"
+#include "model/segment_correlation.h"
 #include "model/stage_timer.h"
 
 namespace dispmvs::model {
@@ -62,6 +65,28 @@ MaskedMap BilinearUp(const MaskedMap& in, int64_t factor) {
   });
 }
 
+// Bilinear x factor for maps whose cell j sits at output pixel factor * j
+// (model v2's strided cells, StridedIntrinsics): output pixel p reads input
+// coordinate p / factor; past the last cell the border value is kept.
+MaskedMap StridedBilinearUp(const MaskedMap& in, int64_t factor) {
+  return UpsampleMasked(in, [&](const torch::Tensor& x) {
+    const int64_t h = x.size(2), w = x.size(3);
+    const auto coordinates = [&](int64_t size) {
+      // Output p -> input p / factor -> grid_sample's (2 u + 1) / size - 1.
+      const torch::Tensor u = torch::arange(size * factor, x.options()) / static_cast<double>(factor);
+      return (2.0 * u + 1.0) / static_cast<double>(size) - 1.0;
+    };
+    const auto yx = torch::meshgrid({coordinates(h), coordinates(w)}, "ij");
+    const torch::Tensor grid =
+        torch::stack({yx[1], yx[0]}, -1).unsqueeze(0).expand({x.size(0), h * factor, w * factor, 2});
+    return F::grid_sample(x, grid,
+                          F::GridSampleFuncOptions()
+                              .mode(torch::kBilinear)
+                              .padding_mode(torch::kBorder)
+                              .align_corners(false));
+  });
+}
+
 torch::Tensor Crop(const torch::Tensor& x, int64_t height, int64_t width) {
   return x.narrow(2, 0, height).narrow(3, 0, width);
 }
@@ -88,7 +113,7 @@ std::string ShapeOf(const torch::Tensor& t) {
   return s + "]";
 }
 
-void CheckInput(const DispMvsInput& in) {
+void CheckInput(const DispMvsInput& in, bool needs_depth_range) {
   const auto fail = [](const std::string& what) {
     throw std::invalid_argument("DispMvsNet: " + what);
   };
@@ -114,6 +139,7 @@ void CheckInput(const DispMvsInput& in) {
   };
   check(in.intrinsics, "intrinsics", {batch, views, 3, 3});
   check(in.extrinsics, "extrinsics", {batch, views, 4, 4});
+  if (!needs_depth_range && !in.depth_min.defined() && !in.depth_max.defined()) return;
   check(in.depth_min, "depth_min", {batch});
   check(in.depth_max, "depth_max", {batch});
   if (!(in.depth_min > 0).all().item<bool>() ||
@@ -155,8 +181,18 @@ struct DispMvsNetImpl::StageInput {
   int64_t iterations = 0;
   // Per (reference, source) pair, [B*N,...], full-resolution intrinsics.
   torch::Tensor K_ref, K_src, R, T;
-  torch::Tensor init_inv_depth;  // [B,1,h,w], detached, valid everywhere
+  // [B,1,h,w], detached, valid everywhere; undefined: start from the best
+  // matches along the segments (needs use_segment_volume).
+  torch::Tensor init_inv_depth;
+  // Model v2: the coarse correlation is the segment volume.
+  bool use_segment_volume = false;
+  // Feature cells at stride * j (StridedIntrinsics), else at the block
+  // centres (ScaleIntrinsics, the paper configuration's convention).
+  bool strided_cells = false;
   bool keep_every_iteration = false;
+  bool keep_matching = false;  // fill StageResult::matching
+  // Fallback start where no source matched, per sample [B] (undefined: 1).
+  torch::Tensor hint_inv_depth;
 };
 
 struct DispMvsNetImpl::StageResult {
@@ -167,7 +203,42 @@ struct DispMvsNetImpl::StageResult {
   std::vector<Iteration> iterations;
   torch::Tensor state;       // [B,1,h,w] inverse depth carried to the next stage
   torch::Tensor agreement;   // [B,1,h,w] confidence of the last iteration
+  std::optional<StageMatching> matching;
 };
+
+namespace {
+
+// Model v2's range-free start: every source's best match along its segment,
+// triangulated, fused with log(confidence) as the fusion logit. Pixels where
+// no source gives a valid depth start at the median of the valid ones of
+// their sample (the whole problem's typical depth; the GRU moves them), or
+// at `fallback` [B] when a sample has none at all.
+torch::Tensor MatchStart(const EpipolarPair& pair, const SegmentCorrelation& volume, int64_t b,
+                         int64_t n, const torch::Tensor& fallback) {
+  const EpipolarSegment& segment = volume.segment();
+  const SegmentMatch match = volume.BestMatch();
+  const int64_t h = match.eflow.size(2), w = match.eflow.size(3);
+  const torch::Tensor src_xy = EflowToSourcePixel(segment.base_xy, segment.dir, match.eflow);
+  const InverseDepth triangulated = TriangulateInverseDepth(pair, src_xy);
+  const torch::Tensor ok = triangulated.valid & match.valid;
+  const torch::Tensor logits = torch::log(match.confidence.clamp_min(1e-6));
+  const FusedInverseDepth fused = FuseInverseDepths(triangulated.inv_depth.view({b, n, h, w}),
+                                                    logits.view({b, n, h, w}), ok.view({b, n, h, w}));
+  std::vector<torch::Tensor> typical;
+  for (int64_t i = 0; i < b; ++i) {
+    const torch::Tensor values = fused.inv_depth[i].masked_select(fused.valid[i]);
+    if (values.numel() > 0) {
+      typical.push_back(values.median().reshape({1}));
+    } else {
+      typical.push_back(fallback.defined() ? fallback.narrow(0, i, 1).to(values.options())
+                                           : torch::ones({1}, values.options()));
+    }
+  }
+  const torch::Tensor typical_w = torch::cat(typical).view({b, 1, 1, 1});
+  return torch::where(fused.valid, fused.inv_depth, typical_w.expand_as(fused.inv_depth)).detach();
+}
+
+}  // namespace
 
 DispMvsNetImpl::DispMvsNetImpl(const ModelConfig& config) : config_(config) {
   config_.Check();
@@ -196,16 +267,30 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
   }
 
   StageTimer* const timer = stage_timer_;
+  const auto stage_intrinsics = [&](const torch::Tensor& K) {
+    return in.strided_cells ? StridedIntrinsics(K, scale) : ScaleIntrinsics(K, scale);
+  };
   const EpipolarPair pair = Timed(timer, NetStage::kGeometry, [&] {
-    return MakeEpipolarPair(ScaleIntrinsics(in.K_ref, scale), ScaleIntrinsics(in.K_src, scale),
-                            in.R, in.T, h, w);
+    return MakeEpipolarPair(stage_intrinsics(in.K_ref), stage_intrinsics(in.K_src), in.R, in.T,
+                            h, w);
   });
   const EpipolarDirection direction =
       Timed(timer, NetStage::kGeometry, [&] { return ComputeEpipolarDirection(pair); });
-  const EpipolarCorrelation correlation = Timed(timer, NetStage::kCorrelation, [&] {
-    return EpipolarCorrelation(in.src_features, in.levels, in.samples);
-  });
   const torch::Tensor ref_features = RepeatPerSource(in.ref_features, n);
+  // Either the segment volume (v2 coarse) or the 2-D sampler (paper, fine).
+  std::optional<SegmentCorrelation> volume;
+  std::optional<EpipolarCorrelation> correlation;
+  if (in.use_segment_volume) {
+    const EpipolarSegment segment = Timed(timer, NetStage::kGeometry, [&] {
+      return ComputeEpipolarSegment(pair, in.src_features.size(2), in.src_features.size(3));
+    });
+    Timed(timer, NetStage::kCorrelation, [&] {
+      volume.emplace(ref_features, in.src_features, segment, in.levels, in.samples);
+    });
+  } else {
+    Timed(timer, NetStage::kCorrelation,
+          [&] { correlation.emplace(in.src_features, in.levels, in.samples); });
+  }
 
   // Context: hidden state (tanh) and per-iteration input (relu), one copy per
   // source pair.
@@ -217,11 +302,21 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
   // Base point and direction are fixed for the whole stage; the E-flow is the
   // offset from the base (method notes, "E-flow").
   torch::Tensor state = in.init_inv_depth;  // [B,1,h,w], detached
+  if (!state.defined()) {
+    if (!volume) throw std::logic_error("DispMvsNet: a match start needs the segment volume");
+    state = Timed(timer, NetStage::kGeometry,
+                  [&] { return MatchStart(pair, *volume, b, n, in.hint_inv_depth); });
+  }
+  StageResult result;
+  if (in.keep_matching && volume) {
+    result.matching = StageMatching{in.stride,          volume->Logits(),
+                                    volume->SampleEflows(), volume->inside(),
+                                    volume->segment().base_xy, volume->segment().dir};
+  }
   const torch::Tensor base_xy = Timed(timer, NetStage::kGeometry, [&] {
     return ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy;
   });
 
-  StageResult result;
   for (int64_t t = 0; t < in.iterations; ++t) {
     const bool last = t + 1 == in.iterations;
     // Reset every source's E-flow from the fused depth: keeps the views
@@ -231,8 +326,23 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
                                 ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy);
     });
     const CorrelationSamples cost = Timed(timer, NetStage::kCorrelation, [&] {
-      return correlation.Lookup(ref_features, base_xy, direction.dir, eflow);
+      return volume ? volume->Lookup(EflowToSourcePixel(base_xy, direction.dir, eflow))
+                    : correlation->Lookup(ref_features, base_xy, direction.dir, eflow);
     });
+    if (in.keep_matching && !volume && t == 0) {
+      // The first window of a local stage: level 0, one stage pixel apart.
+      const torch::Tensor level0 = cost.cost.narrow(1, 0, in.samples);
+      const torch::Tensor inside = cost.inside.narrow(1, 0, in.samples);
+      const double logit_scale = std::sqrt(static_cast<double>(in.src_features.size(1)));
+      const torch::Tensor offsets =
+          (torch::arange(in.samples, eflow.options()) - 0.5 * static_cast<double>(in.samples - 1))
+              .view({1, in.samples, 1, 1});
+      result.matching = StageMatching{
+          in.stride,
+          torch::where(inside & direction.valid, level0 * logit_scale,
+                       torch::full_like(level0, kOutsideLogit)),
+          eflow + offsets, inside & direction.valid, base_xy, direction.dir};
+    }
     const UpdateBlockOutput update = Timed(timer, NetStage::kUpdate, [&] {
       return block->forward(hidden, context, cost.cost, eflow);
     });
@@ -280,7 +390,8 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
 }
 
 DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generator gen) {
-  CheckInput(input);
+  CheckInput(input, config_.NeedsDepthRange());
+  const bool v2 = config_.init == ModelConfig::Init::kMatch;
   const torch::TensorOptions opts = input.images.options();
   const int64_t b = input.images.size(0);
   const int64_t v = input.images.size(1);
@@ -289,8 +400,9 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   const int64_t width = input.images.size(4);
   const int64_t padded_h = (height + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
   const int64_t padded_w = (width + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
-  const torch::Tensor d_min = input.depth_min.to(opts);
-  const torch::Tensor d_max = input.depth_max.to(opts);
+  const bool has_hint = input.depth_min.defined();
+  const torch::Tensor d_min = has_hint ? input.depth_min.to(opts) : torch::Tensor();
+  const torch::Tensor d_max = has_hint ? input.depth_max.to(opts) : torch::Tensor();
   const bool keep_every_iteration = is_training();
 
   // Pad bottom/right: pixel-index intrinsics stay valid.
@@ -324,6 +436,13 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   stage.R = poses.R.reshape({b * n, 3, 3});
   stage.T = poses.T.reshape({b * n, 3});
   stage.keep_every_iteration = keep_every_iteration;
+  stage.strided_cells = v2;
+  stage.keep_matching = v2 && is_training();
+  if (has_hint) {
+    // The geometric mean of the hint's ends: used only where no source
+    // matched anywhere in a sample.
+    stage.hint_inv_depth = (d_min * d_max).rsqrt();
+  }
 
   // Coarse stage from a random inverse depth.
   stage.stride = kCoarseStride;
@@ -333,12 +452,15 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   stage.levels = config_.coarse_levels;
   stage.samples = config_.coarse_samples;
   stage.iterations = config_.coarse_iterations;
-  stage.init_inv_depth = Timed(timer, NetStage::kGeometry, [&] {
-    return RandomInverseDepth(d_min, d_max, stage.ref_features.size(2),
-                              stage.ref_features.size(3), gen)
-        .to(opts)
-        .detach();
-  });
+  stage.use_segment_volume = v2;
+  if (!v2) {
+    stage.init_inv_depth = Timed(timer, NetStage::kGeometry, [&] {
+      return RandomInverseDepth(d_min, d_max, stage.ref_features.size(2),
+                                stage.ref_features.size(3), gen)
+          .to(opts)
+          .detach();
+    });
+  }
   const StageResult coarse = RunStage(stage, coarse_block_);
 
   // Fine stage from the convex-upsampled coarse state.
@@ -350,6 +472,7 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   stage.levels = config_.fine_levels;
   stage.samples = config_.fine_samples;
   stage.iterations = config_.fine_iterations;
+  stage.use_segment_volume = false;
   stage.init_inv_depth = Timed(timer, NetStage::kUpsampling, [&] {
     return ConvexUpsample(coarse.state, coarse_mask, kUpsampleFactor).detach();
   });
@@ -358,6 +481,8 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   // Outputs at full resolution (the upsampling stage of the breakdown: the
   // remaining work here is a few element-wise selections).
   DispMvsOutput out;
+  if (coarse.matching) out.matching.push_back(*coarse.matching);
+  if (fine.matching) out.matching.push_back(*fine.matching);
   {
     const StageTimer::Section section(timer, NetStage::kUpsampling);
     const auto finish = [&](const MaskedMap& full) {
@@ -367,7 +492,10 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
     if (keep_every_iteration) {
       for (const auto& it : coarse.iterations) {
         out.inv_depths.push_back(finish(
-            BilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor), kUpsampleFactor)));
+            v2 ? StridedBilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor),
+                                   kUpsampleFactor)
+               : BilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor),
+                            kUpsampleFactor)));
       }
       for (size_t i = 0; i + 1 < fine.iterations.size(); ++i) {
         const auto& it = fine.iterations[i];
@@ -390,6 +518,45 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
                                   torch::zeros_like(final_inv));
   }
   return out;
+}
+
+void DispMvsNetImpl::set_iterations(int64_t coarse, int64_t fine) {
+  if (coarse < 1 || fine < 1) {
+    throw std::invalid_argument("DispMvsNet: each stage needs at least one iteration");
+  }
+  config_.coarse_iterations = coarse;
+  config_.fine_iterations = fine;
+}
+
+StageMatching DispMvsNetImpl::CoarseMatching(const DispMvsInput& input) {
+  CheckInput(input, /*needs_depth_range=*/false);
+  const torch::TensorOptions opts = input.images.options();
+  const int64_t b = input.images.size(0), v = input.images.size(1), n = v - 1;
+  const int64_t height = input.images.size(3), width = input.images.size(4);
+  const int64_t padded_h = (height + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
+  const int64_t padded_w = (width + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
+  torch::Tensor images = input.images.reshape({b * v, 3, height, width});
+  if (padded_h != height || padded_w != width) {
+    images = F::pad(images, F::PadFuncOptions({0, padded_w - width, 0, padded_h - height})
+                                .mode(torch::kReplicate));
+  }
+  const torch::Tensor coarse = matching_encoder_->forward(images).coarse;
+  const int64_t c = coarse.size(1), h = coarse.size(2), w = coarse.size(3);
+  const torch::Tensor views = coarse.view({b, v, c, h, w});
+  const torch::Tensor ref = RepeatPerSource(views.select(1, 0), n);
+  const torch::Tensor src = views.narrow(1, 1, n).reshape({b * n, c, h, w});
+  const torch::Tensor K = input.intrinsics.to(opts);
+  const RelativePoses poses = ReferenceToSourcePoses(input.extrinsics.to(opts));
+  const double stride = static_cast<double>(kCoarseStride);
+  const EpipolarPair pair =
+      MakeEpipolarPair(StridedIntrinsics(RepeatPerSource(K.select(1, 0), n), stride),
+                       StridedIntrinsics(K.narrow(1, 1, n).reshape({b * n, 3, 3}), stride),
+                       poses.R.reshape({b * n, 3, 3}), poses.T.reshape({b * n, 3}), h, w);
+  const SegmentCorrelation volume(ref, src, ComputeEpipolarSegment(pair, h, w),
+                                  config_.coarse_levels, config_.coarse_samples);
+  return StageMatching{kCoarseStride,         volume.Logits(),
+                       volume.SampleEflows(), volume.inside(),
+                       volume.segment().base_xy, volume.segment().dir};
 }
 
 }  // namespace dispmvs::model

@@ -13,8 +13,15 @@
 // w is detached before the next iteration (as the release and RAFT do); the
 // GRU hidden state is not.
 //
-// The depth range enters only through the random initialisation; nothing is
-// clipped to it. Pixels are invalid where no source gives a valid
+// How the coarse stage starts depends on ModelConfig::init. kRandom (the
+// paper): a random inverse depth inside the depth-range hint, and the coarse
+// correlation sampled in 2-D around the current match every iteration.
+// kMatch (model v2): the coarse correlation is a 1-D volume along each
+// source's whole epipolar segment (segment_correlation.h), computed once; the
+// start is every source's best match along it, triangulated and fused with
+// the matches' confidences as weights; no depth range is used at all. Model
+// v2 also samples its feature maps where the encoder really puts its cells
+// (StridedIntrinsics). Nothing is ever clipped to the hint. Pixels are invalid where no source gives a valid
 // triangulation (w <= 0, non-finite, degenerate geometry); they carry their
 // previous inverse depth into the next iteration and read 0 in the outputs.
 
@@ -24,6 +31,7 @@
 
 #include "model/config.h"
 #include "model/encoder.h"
+#include "model/matching_loss.h"
 #include "model/stage_timer.h"
 #include "model/update_block.h"
 
@@ -41,7 +49,9 @@ struct DispMvsInput {
   // (COLMAP's convention). Only the top 3x4 block is read.
   torch::Tensor extrinsics;
   // [B] positive depth range hint, depth_min < depth_max: used for the random
-  // initialisation only (and by the loss for normalisation).
+  // initialisation only (and by the loss for normalisation). May be left
+  // undefined when the configuration does not need it
+  // (!ModelConfig::NeedsDepthRange()).
   torch::Tensor depth_min;
   torch::Tensor depth_max;
 };
@@ -61,6 +71,10 @@ struct DispMvsOutput {
   // network trusts agrees; with a single source it only says whether that
   // source triangulated validly.
   torch::Tensor confidence;
+  // Model v2 in training mode: what the coarse stage (the segment volume)
+  // and the fine stage (its first lookup window, level 0) matched, for the
+  // matching loss (matching_loss.h). Empty otherwise.
+  std::vector<StageMatching> matching;
 };
 
 // Motion from the reference (view 0) to every source view, from world-to-camera
@@ -90,7 +104,17 @@ class DispMvsNetImpl : public torch::nn::Module {
   // `gen` drives the random initialisation (default generator if undefined).
   DispMvsOutput forward(const DispMvsInput& input, torch::Generator gen = {});
 
+  // The coarse segment volume alone (matching encoder, no GRU), with the
+  // encoder's real cell positions whatever the configuration: how well the
+  // features match, for any design (training diagnostics). Same input checks
+  // as forward().
+  StageMatching CoarseMatching(const DispMvsInput& input);
+
   const ModelConfig& config() const { return config_; }
+  // Changes the GRU iterations per stage of later passes (no parameter
+  // depends on them): e.g. fewer coarse iterations in training than in
+  // inference. Throws std::invalid_argument unless both are >= 1.
+  void set_iterations(int64_t coarse, int64_t fine);
 
   // Times the stages of every later forward pass into `timer` (not owned;
   // null detaches). For benchmarks: see stage_timer.h.

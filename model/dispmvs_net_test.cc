@@ -131,6 +131,68 @@ TEST(DispMvsNetTest, GradientReachesEveryParameter) {
   EXPECT_GT(checked, 20);
 }
 
+ModelConfig FastV2Config() {
+  ModelConfig c = FastConfig();
+  c.init = ModelConfig::Init::kMatch;
+  return c;
+}
+
+TEST(DispMvsNetV2Test, RunsWithoutADepthRangeDeterministically) {
+  DispMvsNet net(FastV2Config());
+  net->eval();
+  torch::NoGradGuard no_grad;
+  DispMvsInput in = MakeInput(2, 2, 48, 64);
+  in.depth_min = torch::Tensor();
+  in.depth_max = torch::Tensor();
+  const DispMvsOutput a = net->forward(in);
+  const DispMvsOutput b = net->forward(in);
+  EXPECT_TRUE(torch::equal(a.depth, b.depth));  // no random draw anywhere
+  EXPECT_TRUE(torch::isfinite(a.depth).all().item<bool>());
+  EXPECT_GT(a.valid.to(torch::kFloat).mean().item<double>(), 0.5);
+  EXPECT_TRUE(a.matching.empty());  // eval mode
+
+  // The paper's design needs the hint, and says so.
+  DispMvsNet paper(FastConfig());
+  paper->eval();
+  EXPECT_THROW(paper->forward(in), std::invalid_argument);
+}
+
+TEST(DispMvsNetV2Test, TrainingReturnsBothStagesMatchingAndTheLossReachesEveryParameter) {
+  DispMvsNet net(FastV2Config());
+  net->train();
+  const int64_t h = 32, w = 48, sources = 2;
+  const DispMvsInput in = MakeInput(1, sources, h, w);
+  const DispMvsOutput out = net->forward(in);
+  ASSERT_EQ(out.matching.size(), 2u);
+  EXPECT_EQ(out.matching[0].stride, 16);
+  EXPECT_EQ(out.matching[1].stride, 4);
+  EXPECT_EQ(out.matching[0].logits.size(0), sources);
+  EXPECT_EQ(out.matching[0].logits.size(2), h / 16);
+  EXPECT_EQ(out.matching[1].logits.size(1), FastV2Config().fine_samples);
+  EXPECT_EQ(out.matching[1].logits.size(2), h / 4);
+
+  // Ground truth: a fronto-parallel plane at depth 3.5 in every view is not
+  // consistent, so give depth only to the reference (no occlusion check).
+  torch::Tensor depths = torch::zeros({1, sources + 1, 1, h, w});
+  depths.select(1, 0).fill_(3.5f);
+  torch::Tensor loss = SequenceLoss(out.inv_depths, depths.select(1, 0), depths.select(1, 0) > 0,
+                                    in.depth_min, in.depth_max);
+  double counted = 0;
+  for (const StageMatching& m : out.matching) {
+    const auto truth = ComputeGroundTruthMatches(depths, in.intrinsics, in.extrinsics, m.stride,
+                                                 m.logits.size(2), m.logits.size(3));
+    const MatchingLossResult r = MatchingLoss(m, truth);
+    counted += r.count;
+    loss = loss + r.loss;
+  }
+  EXPECT_GT(counted, 0);
+  loss.backward();
+  for (const auto& p : net->named_parameters()) {
+    ASSERT_TRUE(p.value().grad().defined()) << p.key();
+    EXPECT_GT(p.value().grad().abs().sum().item<double>(), 0.0) << p.key();
+  }
+}
+
 // R X_r + T must map a point's reference-camera coordinates to its
 // source-camera coordinates, computed independently through the world frame.
 TEST(DispMvsNetTest, ReferenceToSourcePosesComposeThroughTheWorld) {

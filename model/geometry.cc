@@ -249,6 +249,91 @@ EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair) {
   return {torch::where(g.valid, dir, torch::zeros_like(dir)), g.valid};
 }
 
+EpipolarSegment ComputeEpipolarSegment(const EpipolarPair& pair, int64_t src_height,
+                                       int64_t src_width) {
+  if (src_height <= 0 || src_width <= 0) {
+    throw std::invalid_argument("dispmvs geometry: ComputeEpipolarSegment needs a positive size");
+  }
+  const CleanPair p(pair);
+  const double tol = RelativeTolerance(pair.a.scalar_type());
+  const EpipolarDirection direction = ComputeEpipolarDirection(pair);
+  const torch::Tensor dx = Channel(direction.dir, 0);
+  const torch::Tensor dy = Channel(direction.dir, 1);
+
+  // The line through the homogeneous points a and b is l = a x b; its normal
+  // (l_x, l_y) is perpendicular to dir, so with the unit normal n = (-dy, dx)
+  // the line is n . x = c, c = l_z / |(l_x, l_y)|, and the foot of the
+  // perpendicular from the image centre q is q - (n . q - c) n. Computing c as
+  // the signed distance of a point of the line avoids forming l: for the
+  // vanishing point or the epipole, whichever is better conditioned. Both
+  // are ratios of homogeneous coordinates; use the one with the larger
+  // relative z (the other may be at infinity).
+  const torch::Tensor a_norm = p.a_x.abs() + p.a_y.abs() + p.a_z.abs();
+  const torch::Tensor b_norm = p.b_x.abs() + p.b_y.abs() + p.b_z.abs();
+  const torch::Tensor a_rel = p.a_z.abs() / torch::where(a_norm > 0, a_norm, torch::ones_like(a_norm));
+  const torch::Tensor b_rel = p.b_z.abs() / torch::where(b_norm > 0, b_norm, torch::ones_like(b_norm));
+  const torch::Tensor use_a = a_rel >= b_rel;
+  // n . (h_xy / h_z) = (n_x h_x + n_y h_y) / h_z for the chosen point h.
+  const torch::Tensor nx = -dy, ny = dx;
+  const torch::Tensor h_x = torch::where(use_a, p.a_x, p.b_x);
+  const torch::Tensor h_y = torch::where(use_a, p.a_y, p.b_y);
+  const torch::Tensor h_z = torch::where(use_a, p.a_z, p.b_z);
+  const torch::Tensor h_ok = IsClearlyNonZero(h_z, h_x.abs() + h_y.abs() + h_z.abs(), tol);
+  const torch::Tensor safe_h_z = torch::where(h_ok, h_z, torch::ones_like(h_z));
+  const torch::Tensor c = (nx * h_x + ny * h_y) / safe_h_z;
+  const double qx = 0.5 * static_cast<double>(src_width - 1);
+  const double qy = 0.5 * static_cast<double>(src_height - 1);
+  const torch::Tensor offset = nx * qx + ny * qy - c;
+  const torch::Tensor base_x = qx - offset * nx;
+  const torch::Tensor base_y = qy - offset * ny;
+
+  // E-flow of the homogeneous point h relative to base, where h_z is clearly
+  // positive (else unused).
+  const auto eflow_of = [&](const torch::Tensor& x, const torch::Tensor& y, const torch::Tensor& z,
+                            const torch::Tensor& positive) {
+    const torch::Tensor safe_z = torch::where(positive, z, torch::ones_like(z));
+    const torch::Tensor e = dx * (x / safe_z - base_x) + dy * (y / safe_z - base_y);
+    return e.clamp(-kMaxPixelCoordinate, kMaxPixelCoordinate);
+  };
+  const torch::Tensor a_front = IsClearlyPositive(p.a_z, a_norm, tol);
+  const torch::Tensor b_front = IsClearlyPositive(p.b_z, b_norm, tol);
+  const torch::Tensor far_end =
+      torch::where(a_front, eflow_of(p.a_x, p.a_y, p.a_z, a_front),
+                   torch::full_like(p.a_z, -kMaxPixelCoordinate));
+  const torch::Tensor near_end =
+      torch::where(b_front, eflow_of(p.b_x, p.b_y, p.b_z, b_front),
+                   torch::full_like(p.a_z, kMaxPixelCoordinate));
+
+  // Clip to the image: the slab [0, size - 1] along each axis, in E-flow.
+  // An axis the line does not move along either contains the whole line or
+  // none of it.
+  const auto slab = [&](const torch::Tensor& base, const torch::Tensor& d, double size) {
+    const torch::Tensor moves = d.abs() > tol;
+    const torch::Tensor safe_d = torch::where(moves, d, torch::ones_like(d));
+    const torch::Tensor t0 = (0.0 - base) / safe_d;
+    const torch::Tensor t1 = (size - 1.0 - base) / safe_d;
+    const torch::Tensor inside = (base >= 0.0) & (base <= size - 1.0);
+    const torch::Tensor big = torch::full_like(base, kMaxPixelCoordinate);
+    const torch::Tensor lo = torch::where(moves, torch::min(t0, t1), torch::where(inside, -big, big));
+    const torch::Tensor hi = torch::where(moves, torch::max(t0, t1), torch::where(inside, big, -big));
+    return std::make_pair(lo, hi);
+  };
+  const auto [x_lo, x_hi] = slab(base_x, dx, static_cast<double>(src_width));
+  const auto [y_lo, y_hi] = slab(base_y, dy, static_cast<double>(src_height));
+  const torch::Tensor start = torch::max(torch::max(far_end, x_lo), y_lo);
+  const torch::Tensor end = torch::min(torch::min(near_end, x_hi), y_hi);
+  const torch::Tensor valid =
+      direction.valid & h_ok & (a_front | b_front) & (start <= end);
+
+  EpipolarSegment out;
+  out.base_xy = torch::where(valid, torch::cat({base_x, base_y}, 1), torch::zeros_like(direction.dir));
+  out.dir = torch::where(valid, direction.dir, torch::zeros_like(direction.dir));
+  out.start = torch::where(valid, start, torch::zeros_like(start));
+  out.end = torch::where(valid, end, torch::zeros_like(end));
+  out.valid = valid;
+  return out;
+}
+
 InverseDepth TriangulateInverseDepth(const EpipolarPair& pair, const torch::Tensor& src_xy) {
   const CleanPair p(pair);
   CheckImage(src_xy, 2, "src_xy");
@@ -416,23 +501,40 @@ torch::Tensor DenormalizeInverseDepth(const torch::Tensor& normalized, const tor
   return w_far + normalized * (w_near - w_far);
 }
 
-torch::Tensor ScaleIntrinsics(const torch::Tensor& K, double factor) {
+namespace {
+
+// The image-side map x' = s x + shift applied to K: S K with
+// S = [s 0 shift; 0 s shift; 0 0 1]. `who` names the caller in errors.
+torch::Tensor ResampleIntrinsics(const torch::Tensor& K, double factor, bool block_centres,
+                                 const char* who) {
   CheckFloating(K, "K");
   if (K.dim() < 2 || K.size(-1) != 3 || K.size(-2) != 3) {
-    throw std::invalid_argument("dispmvs geometry: ScaleIntrinsics needs [...,3,3] matrices");
+    throw std::invalid_argument(std::string("dispmvs geometry: ") + who + " needs [...,3,3] matrices");
   }
   if (!std::isfinite(factor) || factor <= 0) {
-    throw std::invalid_argument("dispmvs geometry: ScaleIntrinsics factor must be finite and > 0");
+    throw std::invalid_argument(std::string("dispmvs geometry: ") + who +
+                                " factor must be finite and > 0");
   }
-  // The pixel-index map x' = (x + 0.5) / factor - 0.5 as a homogeneous matrix
-  // applied to the image side of K: f' = f / factor, c' = (c + 0.5) / factor - 0.5.
   const double s = 1.0 / factor;
-  const double shift = 0.5 * s - 0.5;
+  const double shift = block_centres ? 0.5 * s - 0.5 : 0.0;
   const torch::Tensor S = torch::tensor({s, 0.0, shift, 0.0, s, shift, 0.0, 0.0, 1.0},
                                         torch::TensorOptions().dtype(torch::kFloat64))
                               .reshape({3, 3})
                               .to(K.options());
   return S.matmul(K);
+}
+
+}  // namespace
+
+torch::Tensor ScaleIntrinsics(const torch::Tensor& K, double factor) {
+  // The pixel-index map x' = (x + 0.5) / factor - 0.5: f' = f / factor,
+  // c' = (c + 0.5) / factor - 0.5 (cells at the centres of their blocks).
+  return ResampleIntrinsics(K, factor, /*block_centres=*/true, "ScaleIntrinsics");
+}
+
+torch::Tensor StridedIntrinsics(const torch::Tensor& K, double stride) {
+  // x' = x / stride (cell j at pixel stride * j).
+  return ResampleIntrinsics(K, stride, /*block_centres=*/false, "StridedIntrinsics");
 }
 
 }  // namespace dispmvs::model

@@ -67,6 +67,37 @@ struct EpipolarDirection {
 // direction does not depend on the unit of the scene.
 EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair);
 
+// The epipolar segment of every reference pixel in one source view: the
+// source pixels that a POSITIVE depth can project to, clipped to the source
+// image. It is defined by the cameras alone (no depth range):
+//  * the valid inverse depths are w > 0 with a_z + w b_z > 0 (in front of the
+//    source camera); over them the projection moves monotonically along the
+//    line in `dir` (towards larger w, nearer points);
+//  * its far end (w -> 0, depth -> infinity) is the vanishing point a_xy / a_z
+//    when a_z > 0, and lies at infinity otherwise (ray parallel to the source
+//    image plane, or a ray that only enters the source's view at a finite
+//    depth);
+//  * its near end (w -> infinity, depth -> 0+) is the epipole b_xy / b_z when
+//    b_z > 0 (the reference camera's centre lies in front of the source
+//    camera), at infinity otherwise;
+//  * the result is that interval intersected with the source image's pixel
+//    centres [0, width-1] x [0, height-1].
+// Positions along the line are E-flows (geometry.h: src = base + e * dir),
+// measured from `base`, the foot of the perpendicular from the source image
+// centre onto the line (always finite, within half an image diagonal of the
+// image when the line crosses it). Ends at infinity are represented by
+// +-2^24 before clipping.
+struct EpipolarSegment {
+  torch::Tensor base_xy;  // [B,2,H,W] source pixels, on the epipolar line
+  torch::Tensor dir;      // [B,2,H,W] unit, as ComputeEpipolarDirection
+  torch::Tensor start;    // [B,1,H,W] E-flow of the far end (after clipping)
+  torch::Tensor end;      // [B,1,H,W] E-flow of the near end, >= start where valid
+  torch::Tensor valid;    // [B,1,H,W] bool: a non-degenerate line with a non-empty segment
+};
+// src_height, src_width: the source image size at the pair's resolution.
+EpipolarSegment ComputeEpipolarSegment(const EpipolarPair& pair, int64_t src_height,
+                                       int64_t src_width);
+
 struct InverseDepth {
   torch::Tensor inv_depth;  // [B,1,H,W]; 0 where invalid
   torch::Tensor valid;      // [B,1,H,W] bool: w > 0 and finite, in front of both cameras
@@ -122,5 +153,15 @@ torch::Tensor DenormalizeInverseDepth(const torch::Tensor& normalized, const tor
 // c' = (c + 0.5) / factor - 0.5, f' = f / factor. K is [...,3,3]; factor > 0
 // is the downsampling factor (4, 16).
 torch::Tensor ScaleIntrinsics(const torch::Tensor& K, double factor);
+
+// Intrinsics of a map whose cell j sits at full-resolution pixel stride * j:
+// f' = f / stride, c' = c / stride. This is where a chain of stride-2
+// convolutions with "same" padding (3x3 pad 1, 7x7 pad 3, 1x1) puts its
+// cells: output j reads the input centred at 2j, so after k of them cell j
+// is centred at 2^k j, not at the centre 2^k j + (2^k - 1) / 2 of its block
+// that ScaleIntrinsics assumes (7.5 pixels off at 1/16). Model v2 samples its
+// feature maps with these; the paper configuration keeps ScaleIntrinsics,
+// which its weights were trained with.
+torch::Tensor StridedIntrinsics(const torch::Tensor& K, double stride);
 
 }  // namespace dispmvs::model

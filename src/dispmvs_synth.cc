@@ -69,6 +69,9 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "bench/motorcycle_check.sh evaluates on them).")
       ("photo_probability", po::value<double>(&config.photo_probability)->default_value(config.photo_probability, "0.5"),
        "With --texture_dir: the share of textures that are photos.")
+      ("difficulty", po::value<double>(&config.difficulty)->default_value(config.difficulty, "1"),
+       "Scene difficulty in [0, 1]: 1 is the full generator; lower values shrink the baselines, "
+       "remove occluders, soften the light and narrow the per-view photometry.")
       ("ply_stride", po::value<int>(&options.workspace.ply_stride)->default_value(options.workspace.ply_stride),
        "ground_truth/points.ply keeps every n-th depth sample per row and column.");
 

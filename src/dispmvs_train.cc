@@ -16,6 +16,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "train/trainer.h"
 
@@ -25,10 +26,15 @@ using dispmvs::train::TrainOptions;
 
 constexpr const char* kUsage = R"(usage:
   dispmvs_train --checkpoint_dir DIR [options]   train, resuming from DIR's latest checkpoint
-  dispmvs_train --evaluate WEIGHTS [options]     validation table for depth-range widening x = 1, 2, 3
+  dispmvs_train --evaluate WEIGHTS [options]     validation table for depth-range widenings x
 
 options (default):
-  --config paper|small        network size (small); training only, evaluation reads it from WEIGHTS
+  --config NAME               network (small): paper | small (the paper's design: random start inside
+                              the depth-range hint) or paper_v2 | small_v2 (model v2: range-free start
+                              from the best match along each epipolar segment, matching loss);
+                              training only, evaluation reads it from WEIGHTS
+  --widenings LIST            evaluation only: comma-separated x values, 'none' = no hint at all
+                              (v2 weights only) (1,2,3)
   --height H --width W        image size (128, 160)
   --sources N                 source views per sample (4)
   --batch B                   samples per step (1)
@@ -47,6 +53,18 @@ options (default):
                               motorcycle_*, which bench/motorcycle_check.sh evaluates on);
                               validation stays procedural (none)
   --photo_probability P       share of textures that are photos, with --texture_dir (0.5)
+  --matching_loss_weight W    v2: weight of the matching loss (cross-entropy along the epipolar
+                              segment, coarse and fine) added to the depth loss (0.5)
+  --matching_warmup_steps K   v2: the first K steps train with the matching loss alone (0)
+  --scene_reuse R             each generated scene serves R consecutive steps, each time with
+                              another view as the reference (1)
+  --difficulty_start D        curriculum: generated scenes start at difficulty D in [0, 1] (smaller
+                              baselines, fewer occluders, softer light, milder photometry) (1)
+  --difficulty_ramp_steps K   ... and reach full difficulty linearly over K steps (0)
+  --train_coarse_iterations K coarse GRU iterations in training steps, 0 = the config's; validation
+                              and the saved weights keep the config's (0)
+  --max_cpu_minutes M         stop (checkpoint, validate, write the model) after M minutes of
+                              process CPU time; 0 = no limit (0)
   --init_weights FILE         start from these weights (e.g. models/dispmvs_small.safetensors,
                               to fine-tune at a larger size) instead of a random initialisation;
                               the file must fit --config (none)
@@ -102,7 +120,28 @@ double ParseDouble(const std::string& flag, const std::string& value) {
   return v;
 }
 
+// "1,3,10,none": widening factors >= 1, or none (0: no hint).
+std::vector<double> ParseWidenings(const std::string& flag, const std::string& value) {
+  std::vector<double> out;
+  size_t begin = 0;
+  while (begin <= value.size()) {
+    const size_t comma = value.find(',', begin);
+    const std::string item = value.substr(begin, comma == std::string::npos ? std::string::npos : comma - begin);
+    if (item == "none") {
+      out.push_back(0.0);
+    } else {
+      const double x = ParseDouble(flag, item);
+      if (x < 1) throw std::invalid_argument(flag + ": each x must be >= 1 or 'none', got '" + item + "'");
+      out.push_back(x);
+    }
+    if (comma == std::string::npos) break;
+    begin = comma + 1;
+  }
+  return out;
+}
+
 struct CommandLine {
+  std::vector<double> widenings{1, 2, 3};
   TrainOptions options;
   std::string evaluate_weights;  // empty: train
   bool help = false;
@@ -135,6 +174,14 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--mvsnet_root") o.mvsnet_root = value;
     else if (flag == "--mvsnet_fraction") o.mvsnet_fraction = ParseDouble(flag, value);
     else if (flag == "--init_weights") o.init_weights = value;
+    else if (flag == "--matching_loss_weight") o.matching_loss_weight = ParseDouble(flag, value);
+    else if (flag == "--matching_warmup_steps") o.matching_warmup_steps = ParseInt(flag, value);
+    else if (flag == "--scene_reuse") o.scene_reuse = ParseInt(flag, value);
+    else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
+    else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
+    else if (flag == "--difficulty_ramp_steps") o.difficulty_ramp_steps = ParseInt(flag, value);
+    else if (flag == "--max_cpu_minutes") o.max_cpu_minutes = ParseDouble(flag, value);
+    else if (flag == "--widenings") cl.widenings = ParseWidenings(flag, value);
     else if (flag == "--texture_dir") o.texture_dir = value;
     else if (flag == "--photo_probability") o.photo_probability = ParseDouble(flag, value);
     else if (flag == "--seed") o.seed = ParseUnsigned(flag, value);
@@ -157,12 +204,14 @@ CommandLine Parse(int argc, char** argv) {
 
 void PrintEvaluation(const CommandLine& cl) {
   const auto& o = cl.options;
-  const auto rows = dispmvs::train::EvaluateWeights(cl.evaluate_weights, o, {1, 2, 3});
+  const auto rows = dispmvs::train::EvaluateWeights(cl.evaluate_weights, o, cl.widenings);
   std::cout << "weights " << cl.evaluate_weights << ": " << o.num_validation_scenes
             << " validation scenes (seeds " << o.validation_seed_base << "..), " << o.width << "x"
             << o.height << ", N = " << o.num_sources << "\n";
   for (const auto& row : rows) {
-    std::printf("x=%g  %s\n", row.widening, dispmvs::train::FormatMetrics(row.metrics).c_str());
+    const std::string x = row.widening == 0 ? std::string("none") : std::to_string(row.widening).substr(0, 5);
+    std::printf("x=%s  %s  %s\n", x.c_str(), dispmvs::train::FormatMetrics(row.metrics).c_str(),
+                dispmvs::train::FormatMatching(row).c_str());
   }
 }
 

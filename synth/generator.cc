@@ -45,6 +45,21 @@ torch::Tensor WorldToCamera(const PinholeCamera& cam, double scale) {
   return m;
 }
 
+// Photometry ranges at difficulty d: every range pulled towards its neutral
+// value (1 for gain, gamma and white balance; 0 for noise and blur) by d.
+PhotometryRanges EasierPhotometry(const PhotometryRanges& r, double d) {
+  const auto towards_one = [&](double x) { return 1.0 + d * (x - 1.0); };
+  PhotometryRanges out = r;
+  out.gain_min = towards_one(r.gain_min);
+  out.gain_max = towards_one(r.gain_max);
+  out.gamma_min = towards_one(r.gamma_min);
+  out.gamma_max = towards_one(r.gamma_max);
+  out.white_balance_jitter = d * r.white_balance_jitter;
+  out.noise_sigma_max = d * r.noise_sigma_max;
+  out.blur_sigma_max = d * r.blur_sigma_max;
+  return out;
+}
+
 }  // namespace
 
 void SynthConfig::Check() const {
@@ -76,6 +91,7 @@ void SynthConfig::Check() const {
     fail("photometry ranges out of bounds");
   }
   if (dtype != torch::kFloat && dtype != torch::kDouble) fail("dtype must be float32 or float64");
+  if (!(difficulty >= 0 && difficulty <= 1)) fail("difficulty must be in [0, 1]");
   if (!(photo_probability >= 0 && photo_probability <= 1)) fail("photo_probability must be in [0, 1]");
   if (photos) CheckPhotoSet(*photos);
   if (march_steps < 1 || march_steps > 256 || bisection_steps < 0 || bisection_steps > 64) {
@@ -95,13 +111,26 @@ SynthScene DrawScene(const SynthConfig& config, uint64_t seed) {
   intrinsics.height = config.height;
   intrinsics.width = config.width;
   const Rig rig = MakeRig(out.rig, config.num_views, intrinsics, rig_rng);
-  const int objects = static_cast<int>(scene_rng.Int(config.min_objects, config.max_objects));
+  const double d = config.difficulty;
+  int objects = static_cast<int>(scene_rng.Int(config.min_objects, config.max_objects));
+  if (d < 1) objects = static_cast<int>(std::lround(objects * (0.4 + 0.6 * d)));
   PhotoTextureChoice photos;
   photos.num_photos = config.photos ? static_cast<int>(config.photos->size()) : 0;
   photos.photo_probability = config.photo_probability;
   out.scene = BuildScene(rig, objects, config.height, config.width, scene_rng, photos);
   out.cameras = rig.cameras;
-  for (int v = 0; v < config.num_views; ++v) out.photometry.push_back(RandomPhotometry(config.photometry, photometry_rng));
+  const PhotometryRanges photometry = d < 1 ? EasierPhotometry(config.photometry, d) : config.photometry;
+  for (int v = 0; v < config.num_views; ++v) out.photometry.push_back(RandomPhotometry(photometry, photometry_rng));
+  if (d < 1) {
+    const Vec3 reference_centre = out.cameras[0].Center();
+    const double baseline = 0.35 + 0.65 * d;
+    for (size_t v = 1; v < out.cameras.size(); ++v) {
+      PinholeCamera& cam = out.cameras[v];
+      const Vec3 centre = reference_centre + baseline * (cam.Center() - reference_centre);
+      cam.translation = -1.0 * (cam.rotation * centre);
+    }
+    out.scene.ambient += 0.5 * (1.0 - d) * (1.0 - out.scene.ambient);
+  }
   out.scale = scale_rng.LogUniform(config.scale_min, config.scale_max);
   return out;
 }

@@ -46,6 +46,17 @@ struct SynthConfig {
   // and the scenes are exactly those of a configuration without photos.
   std::shared_ptr<const PhotoSet> photos;
   double photo_probability = 0.5;
+  // Difficulty in [0, 1] (a curriculum knob): 1 is the full generator (and
+  // gives exactly the scenes of a configuration without the knob); lower
+  // values make every scene easier with the same random draws:
+  //  * baseline: source camera centres moved towards the reference's, to
+  //    0.35 + 0.65 d of their distance (orientations kept);
+  //  * occlusion: free objects scaled to 0.4 + 0.6 d of the drawn count;
+  //  * lighting: the ambient term raised by (1 - d) / 2 of what is left to 1
+  //    (softer shadows, fewer dark regions);
+  //  * darkness, contrast and sensor: the per-view gain, gamma and white-
+  //    balance ranges narrowed around 1, noise and blur scaled by d.
+  double difficulty = 1.0;
 
   // Throws std::invalid_argument on sizes, counts or ranges that make no sense.
   void Check() const;

@@ -214,6 +214,42 @@ TEST(GeneratorTest, ConfigCheckRejectsNonsense) {
   EXPECT_THROW(GenerateSample(c, 1, torch::kCPU), std::invalid_argument);
 }
 
+TEST(GeneratorTest, DifficultyOneIsTheFullGeneratorAndLowerIsEasier) {
+  SynthConfig config = SmallConfig();
+  const SynthSample full = GenerateSample(config, 7, torch::kCPU);
+  config.difficulty = 1.0;  // explicit: the same scenes bit for bit
+  const SynthSample one = GenerateSample(config, 7, torch::kCPU);
+  EXPECT_TRUE(torch::equal(full.images, one.images));
+  EXPECT_TRUE(torch::equal(full.world_to_camera, one.world_to_camera));
+
+  // Baselines shrink to 0.35 of the full ones at difficulty 0, same rig and
+  // reference camera; photometry gets closer to neutral; ambient rises.
+  double full_baseline = 0, easy_baseline = 0;
+  double full_spread = 0, easy_spread = 0;
+  for (uint64_t seed = 1; seed <= 6; ++seed) {
+    SynthConfig hard = SmallConfig(), easy = SmallConfig();
+    easy.difficulty = 0.0;
+    const SynthScene a = DrawScene(hard, seed), b = DrawScene(easy, seed);
+    ASSERT_EQ(a.rig, b.rig);
+    EXPECT_EQ(a.cameras[0].translation[0], b.cameras[0].translation[0]);
+    EXPECT_GE(b.scene.ambient, a.scene.ambient);
+    for (size_t v = 1; v < a.cameras.size(); ++v) {
+      full_baseline += Norm(a.cameras[v].Center() - a.cameras[0].Center());
+      easy_baseline += Norm(b.cameras[v].Center() - b.cameras[0].Center());
+    }
+    for (size_t v = 0; v < a.photometry.size(); ++v) {
+      full_spread += std::abs(a.photometry[v].gain - 1.0);
+      easy_spread += std::abs(b.photometry[v].gain - 1.0);
+    }
+  }
+  EXPECT_NEAR(easy_baseline / full_baseline, 0.35, 1e-9);
+  EXPECT_EQ(easy_spread, 0.0);  // gain range collapsed to 1
+  EXPECT_GT(full_spread, 0.0);
+
+  config.difficulty = 1.5;
+  EXPECT_THROW(config.Check(), std::invalid_argument);
+}
+
 TEST(GeneratorTest, RobustDepthRangeIsNearestRankQuantile) {
   // Values 1..101 (and zeros, which are ignored): the 2nd percentile is the
   // value at rank round(0.02 * 100) = 2, i.e. 3; the 98th at rank 98, i.e. 99.

@@ -8,12 +8,12 @@ namespace dispmvs::train {
 
 TrainingBatch MakeBatch(const std::vector<synth::SynthSample>& samples, double range_widening) {
   if (samples.empty()) throw std::invalid_argument("MakeBatch: no samples");
-  if (!std::isfinite(range_widening) || range_widening < 1.0) {
-    throw std::invalid_argument("MakeBatch: range widening must be a finite number >= 1, got " +
+  if (!std::isfinite(range_widening) || (range_widening < 1.0 && range_widening != 0.0)) {
+    throw std::invalid_argument("MakeBatch: range widening must be 0 (no hint) or a finite number >= 1, got " +
                                 std::to_string(range_widening));
   }
   const auto& first = samples.front();
-  std::vector<torch::Tensor> images, intrinsics, extrinsics, depths;
+  std::vector<torch::Tensor> images, intrinsics, extrinsics, depths, all_depths;
   std::vector<double> d_min, d_max;
   for (size_t i = 0; i < samples.size(); ++i) {
     const auto& s = samples[i];
@@ -31,6 +31,7 @@ TrainingBatch MakeBatch(const std::vector<synth::SynthSample>& samples, double r
     intrinsics.push_back(s.intrinsics);
     extrinsics.push_back(s.world_to_camera);
     depths.push_back(s.depths.select(0, 0));  // reference view: [1,H,W]
+    all_depths.push_back(s.depths);
     d_min.push_back(s.depth_min / range_widening);
     d_max.push_back(s.depth_max * range_widening);
   }
@@ -39,12 +40,15 @@ TrainingBatch MakeBatch(const std::vector<synth::SynthSample>& samples, double r
   batch.input.images = torch::stack(images);
   batch.input.intrinsics = torch::stack(intrinsics);
   batch.input.extrinsics = torch::stack(extrinsics);
-  batch.input.depth_min = torch::tensor(d_min, range_options)
-                              .to(first.images.device(), first.images.scalar_type());
-  batch.input.depth_max = torch::tensor(d_max, range_options)
-                              .to(first.images.device(), first.images.scalar_type());
+  if (range_widening != 0.0) {
+    batch.input.depth_min = torch::tensor(d_min, range_options)
+                                .to(first.images.device(), first.images.scalar_type());
+    batch.input.depth_max = torch::tensor(d_max, range_options)
+                                .to(first.images.device(), first.images.scalar_type());
+  }
   batch.gt_depth = torch::stack(depths);
   batch.gt_valid = batch.gt_depth > 0;
+  batch.gt_depths = torch::stack(all_depths);
   return batch;
 }
 

@@ -40,6 +40,15 @@ TEST(MakeBatchTest, WideningDividesMinAndMultipliesMax) {
   EXPECT_FLOAT_EQ(batch.input.depth_max[0].item<float>(), 24.0f);
 }
 
+TEST(MakeBatchTest, AllViewsDepthsAndNoHintAtZeroWidening) {
+  const auto batch = MakeBatch({FakeSample(3, 4, 5, 2, 8, 0.25f)}, 0.0);
+  EXPECT_FALSE(batch.input.depth_min.defined());
+  EXPECT_FALSE(batch.input.depth_max.defined());
+  ASSERT_EQ(batch.gt_depths.sizes(), (std::vector<int64_t>{1, 3, 1, 4, 5}));
+  EXPECT_EQ(batch.gt_depths[0][1].max().item<float>(), 7.0f);  // a source's own depth
+  EXPECT_TRUE(torch::equal(batch.gt_depths.select(1, 0), batch.gt_depth));
+}
+
 TEST(MakeBatchTest, RejectsBadInput) {
   EXPECT_THROW(MakeBatch({}), std::invalid_argument);
   EXPECT_THROW(MakeBatch({FakeSample(2, 2, 2, 0, 0, 0)}), std::invalid_argument);  // empty view

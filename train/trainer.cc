@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -18,6 +19,7 @@
 #include "model/config.h"
 #include "model/dispmvs_net.h"
 #include "model/loss.h"
+#include "model/matching_loss.h"
 #include "model/safetensors.h"
 #include "synth/generator.h"
 #include "synth/photo_folder.h"
@@ -71,7 +73,39 @@ torch::Device ParseDevice(const std::string& text) {
 ModelConfig ModelConfigByName(const std::string& name) {
   if (name == "paper") return ModelConfig::Paper();
   if (name == "small") return ModelConfig::Small();
-  throw std::invalid_argument("config must be 'paper' or 'small', got '" + name + "'");
+  if (name == "small_v2") return ModelConfig::SmallV2();
+  if (name == "paper_v2") {
+    ModelConfig config = ModelConfig::Paper();
+    config.name = "paper_v2";
+    config.init = ModelConfig::Init::kMatch;
+    return config;
+  }
+  throw std::invalid_argument("config must be 'paper', 'small', 'paper_v2' or 'small_v2', got '" +
+                              name + "'");
+}
+
+// Process CPU time (all threads), seconds.
+double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+// The sample with view `reference` as its reference and the other views, in
+// their order, as sources; the depth-range hint recomputed for it. Returns
+// the sample unchanged for reference 0, or when that view sees no surface.
+synth::SynthSample WithReference(const synth::SynthSample& sample, int64_t reference) {
+  const int64_t views = sample.images.size(0);
+  if (reference % views == 0) return sample;
+  std::vector<int64_t> order{reference % views};
+  for (int64_t v = 0; v < views; ++v) {
+    if (v != reference % views) order.push_back(v);
+  }
+  const torch::Tensor index = torch::tensor(order, torch::kLong).to(sample.images.device());
+  synth::SynthSample out = sample;
+  out.images = sample.images.index_select(0, index);
+  out.intrinsics = sample.intrinsics.index_select(0, index);
+  out.world_to_camera = sample.world_to_camera.index_select(0, index);
+  out.depths = sample.depths.index_select(0, index);
+  std::tie(out.depth_min, out.depth_max) = synth::RobustDepthRange(out.depths[0]);
+  if (!(out.depth_min > 0 && out.depth_min < out.depth_max)) return sample;
+  return out;
 }
 
 synth::SynthConfig SynthConfigFor(const TrainOptions& options) {
@@ -126,13 +160,14 @@ std::optional<MvsnetSource> OpenMvsnetSource(const TrainOptions& options, const 
   return source;
 }
 
-// Sample `index` of training step `step`: from the data set with probability
-// mvsnet_fraction, else a generated scene; both the choice and the reference
-// view follow from TrainingSampleSeed alone, so runs stay reproducible.
+// Sample `index` of scene group `group` (= step / scene_reuse): from the data
+// set with probability mvsnet_fraction, else a generated scene; both the
+// choice and the reference view follow from TrainingSampleSeed alone, so runs
+// stay reproducible.
 synth::SynthSample TrainingSample(const TrainOptions& options, const synth::SynthConfig& synth_config,
-                                  const std::optional<MvsnetSource>& mvsnet, int64_t step, int64_t index,
+                                  const std::optional<MvsnetSource>& mvsnet, int64_t group, int64_t index,
                                   torch::Device device) {
-  const uint64_t seed = TrainingSampleSeed(options.seed, step, index);
+  const uint64_t seed = TrainingSampleSeed(options.seed, group, index);
   if (mvsnet) {
     if (const auto view = ChooseMvsnetView(seed, options.mvsnet_fraction, mvsnet->views.size())) {
       return LoadMvsnetSample(mvsnet->dataset, mvsnet->views[*view], mvsnet->sample_options, device);
@@ -287,7 +322,13 @@ Settings RunSettings(const TrainOptions& o) {
           {"mvsnet_fraction", mvsnet_fraction.str()},
           {"init_weights", InitWeightsSetting(o.init_weights)},
           {"texture_dir", TextureDirSetting(o.texture_dir)},
-          {"photo_probability", o.texture_dir.empty() ? "" : std::to_string(o.photo_probability)}};
+          {"photo_probability", o.texture_dir.empty() ? "" : std::to_string(o.photo_probability)},
+          {"matching_loss_weight", std::to_string(o.matching_loss_weight)},
+          {"matching_warmup_steps", std::to_string(o.matching_warmup_steps)},
+          {"scene_reuse", std::to_string(o.scene_reuse)},
+          {"train_coarse_iterations", std::to_string(o.train_coarse_iterations)},
+          {"difficulty_start", std::to_string(o.difficulty_start)},
+          {"difficulty_ramp_steps", std::to_string(o.difficulty_ramp_steps)}};
 }
 
 // Settings added after checkpoints were first written, with the value that a
@@ -298,6 +339,14 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "train_widening_max") return "1";
   if (key == "init_weights") return "";
   if (key == "texture_dir" || key == "photo_probability") return "";
+  // Model v2's settings: before them, runs trained the paper's design
+  // (whose configs ignore the matching loss) on a new scene every step.
+  if (key == "matching_loss_weight") return std::to_string(0.5);
+  if (key == "matching_warmup_steps") return "0";
+  if (key == "scene_reuse") return "1";
+  if (key == "train_coarse_iterations") return "0";
+  if (key == "difficulty_start") return std::to_string(1.0);
+  if (key == "difficulty_ramp_steps") return "0";
   return std::nullopt;
 }
 
@@ -382,21 +431,50 @@ std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, to
   return scenes;
 }
 
-DepthMetrics Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
-                      const TrainOptions& options, double widening) {
+// Top-1 accuracy of the coarse segment volume: (hits, counted pairs).
+std::pair<double, double> CoarseMatchingHits(DispMvsNet& net, const TrainingBatch& batch) {
+  const model::StageMatching matching = net->CoarseMatching(batch.input);
+  const auto truth = model::ComputeGroundTruthMatches(
+      batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, matching.stride,
+      matching.logits.size(2), matching.logits.size(3));
+  const auto result = model::MatchingLoss(matching, truth);
+  return {result.top1, result.count};
+}
+
+WideningResult Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                        const TrainOptions& options, double widening) {
+  if (widening == 0 && net->config().NeedsDepthRange()) {
+    throw std::invalid_argument("weights of config '" + net->config().name +
+                                "' need a depth-range hint: no 'none' row for them");
+  }
   const bool was_training = net->is_training();
   net->eval();
   torch::NoGradGuard no_grad;
   DepthMetricSums sums;
+  double hits = 0, counted = 0;
+  // Validation runs the iterations the weights are saved with.
+  const ModelConfig saved = ModelConfigByName(options.config);
+  const int64_t train_coarse = net->config().coarse_iterations;
+  const bool evaluating_file = options.checkpoint_dir.empty();
+  if (!evaluating_file) net->set_iterations(saved.coarse_iterations, saved.fine_iterations);
   for (size_t i = 0; i < scenes.size(); ++i) {
     const auto batch = MakeBatch({scenes[i]}, widening);
     // Same initialisation for a scene at every evaluation: the numbers differ
     // between evaluations only because the weights do.
     const auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
     sums += SumDepthMetrics(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
+    const auto [h, c] = CoarseMatchingHits(net, batch);
+    hits += h;
+    counted += c;
   }
   net->train(was_training);
-  return Finalize(sums);
+  if (!evaluating_file) net->set_iterations(train_coarse, saved.fine_iterations);
+  WideningResult result;
+  result.widening = widening;
+  result.metrics = Finalize(sums);
+  result.coarse_top1 = counted > 0 ? hits / counted : 0.0;
+  result.matching_count = counted;
+  return result;
 }
 
 }  // namespace
@@ -446,7 +524,33 @@ void TrainOptions::Check(bool for_training) const {
   if (!init_weights.empty() && !fs::is_regular_file(init_weights)) {
     fail("init_weights: no such file " + init_weights);
   }
+  if (!(std::isfinite(matching_loss_weight) && matching_loss_weight >= 0)) {
+    fail("matching_loss_weight must be a finite number >= 0, got " + std::to_string(matching_loss_weight));
+  }
+  if (matching_warmup_steps < 0) {
+    fail("matching_warmup_steps must be >= 0, got " + std::to_string(matching_warmup_steps));
+  }
+  if (matching_warmup_steps > 0 && (matching_loss_weight == 0 || ModelConfigByName(config).NeedsDepthRange())) {
+    fail("matching_warmup_steps needs a v2 config and matching_loss_weight > 0");
+  }
+  if (!(difficulty_start >= 0 && difficulty_start <= 1)) {
+    fail("difficulty_start must be in [0, 1], got " + std::to_string(difficulty_start));
+  }
+  if (difficulty_ramp_steps < 0) fail("difficulty_ramp_steps must be >= 0");
+  if (train_coarse_iterations < 0 || train_coarse_iterations > 1000) {
+    fail("train_coarse_iterations must be in [0, 1000], got " + std::to_string(train_coarse_iterations));
+  }
+  if (scene_reuse < 1 || scene_reuse > 64) fail("scene_reuse must be in [1, 64], got " + std::to_string(scene_reuse));
+  if (!(std::isfinite(max_cpu_minutes) && max_cpu_minutes >= 0)) {
+    fail("max_cpu_minutes must be a finite number >= 0, got " + std::to_string(max_cpu_minutes));
+  }
   SynthConfigFor(*this);  // the generator's own limits
+}
+
+double TrainingDifficultyAt(const TrainOptions& options, int64_t step) {
+  if (options.difficulty_ramp_steps <= 0 || step >= options.difficulty_ramp_steps) return 1.0;
+  const double t = static_cast<double>(step) / static_cast<double>(options.difficulty_ramp_steps);
+  return options.difficulty_start + (1.0 - options.difficulty_start) * t;
 }
 
 double LearningRateAt(const TrainOptions& options, int64_t step) {
@@ -464,6 +568,12 @@ double TrainingWideningAt(const TrainOptions& options, int64_t step) {
   const uint64_t bits = Mix(Mix(options.seed, 0x1D3A7Eu), static_cast<uint64_t>(step)) >> 11;
   const double u = static_cast<double>(bits) * (1.0 / 9007199254740992.0);
   return std::exp(u * std::log(options.train_widening_max));
+}
+
+std::string FormatMatching(const WideningResult& r) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "coarse top-1: %.4f", r.coarse_top1);
+  return buffer;
 }
 
 std::string FormatMetrics(const DepthMetrics& m) {
@@ -522,58 +632,120 @@ void Train(const TrainOptions& options, std::ostream& console) {
              std::to_string(options.mvsnet_fraction));
   }
   const auto validation_scenes = ValidationScenes(options, device);
+  const double cpu_start = CpuSeconds();
   auto validate = [&](int64_t step) {
     if (validation_scenes.empty()) return;
-    log.Line("validate step " + std::to_string(step) + "  x=1  " +
-             FormatMetrics(Validate(net, validation_scenes, options, 1.0)));
+    const WideningResult result = Validate(net, validation_scenes, options, 1.0);
+    char cpu[64];
+    std::snprintf(cpu, sizeof cpu, "  cpu %.0f s", CpuSeconds() - cpu_start);
+    log.Line("validate step " + std::to_string(step) + cpu + "  x=1  " + FormatMetrics(result.metrics) +
+             "  " + FormatMatching(result));
   };
 
+  const bool v2 = !config.NeedsDepthRange();
+  const bool matching_loss = v2 && options.matching_loss_weight > 0;
+  if (options.train_coarse_iterations > 0) {
+    net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
+  }
   net->train();
   const auto run_start = std::chrono::steady_clock::now();
+  const auto seconds_since = [](std::chrono::steady_clock::time_point t) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+  };
   int64_t last_validated = -1;
+  int64_t final_step = std::max(start, options.steps);
+  // The generated scenes of the current scene group (scene_reuse).
+  int64_t cached_group = -1;
+  std::vector<synth::SynthSample> cached_scenes;
   for (int64_t step = start; step < options.steps; ++step) {
     const auto step_start = std::chrono::steady_clock::now();
+    const double step_cpu_start = CpuSeconds();
     const double lr = LearningRateAt(options, step);
     for (auto& group : optimizer.param_groups()) {
       static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
     }
 
-    std::vector<synth::SynthSample> samples;
-    for (int64_t j = 0; j < options.batch_size; ++j) {
-      samples.push_back(TrainingSample(options, synth_config, mvsnet, step, j, device));
+    const int64_t group = step / options.scene_reuse;
+    if (group != cached_group) {
+      synth_config.difficulty = TrainingDifficultyAt(options, group * options.scene_reuse);
+      cached_scenes.clear();
+      for (int64_t j = 0; j < options.batch_size; ++j) {
+        cached_scenes.push_back(TrainingSample(options, synth_config, mvsnet, group, j, device));
+      }
+      cached_group = group;
     }
+    std::vector<synth::SynthSample> samples;
+    for (const auto& scene : cached_scenes) samples.push_back(WithReference(scene, step % options.scene_reuse));
     const double widening = TrainingWideningAt(options, step);
     const auto batch = MakeBatch(samples, widening);
+    const double generate_seconds = seconds_since(step_start);
+
+    const auto forward_start = std::chrono::steady_clock::now();
     const auto output = net->forward(batch.input, CpuGenerator(TrainingInitSeed(options.seed, step)));
     // Normalised by the unwidened range (see TrainOptions::train_widening_max).
-    const auto loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
-                                          batch.input.depth_min * widening, batch.input.depth_max / widening);
+    const auto depth_loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
+                                                batch.input.depth_min * widening, batch.input.depth_max / widening);
+    torch::Tensor loss = depth_loss;
+    double match_loss_value = 0, top1 = 0, counted = 0;
+    if (matching_loss) {
+      torch::Tensor match_loss = torch::zeros({}, depth_loss.options());
+      for (const auto& stage : output.matching) {
+        const auto truth = model::ComputeGroundTruthMatches(batch.gt_depths, batch.input.intrinsics,
+                                                            batch.input.extrinsics, stage.stride,
+                                                            stage.logits.size(2), stage.logits.size(3));
+        const auto result = model::MatchingLoss(stage, truth);
+        match_loss = match_loss + result.loss;
+        if (stage.stride == model::DispMvsNetImpl::kCoarseStride) {
+          top1 = result.top1;
+          counted = result.count;
+        }
+      }
+      match_loss_value = match_loss.item<double>();
+      const bool warmup = step < options.matching_warmup_steps;
+      // During the warm-up the depth loss enters with weight 0: every
+      // parameter still receives a (zero) gradient, so Adam steps them all
+      // alike and the checkpoint's single step count stays true.
+      loss = warmup ? match_loss + 0.0 * depth_loss
+                    : depth_loss + options.matching_loss_weight * match_loss;
+    }
+    const double forward_seconds = seconds_since(forward_start);
+
+    const auto backward_start = std::chrono::steady_clock::now();
     optimizer.zero_grad();
     loss.backward();
     if (options.grad_clip > 0) torch::nn::utils::clip_grad_norm_(net->parameters(), options.grad_clip);
     optimizer.step();
+    const double backward_seconds = seconds_since(backward_start);
 
-    const auto now = std::chrono::steady_clock::now();
-    const double step_seconds = std::chrono::duration<double>(now - step_start).count();
-    const double mean_seconds =
-        std::chrono::duration<double>(now - run_start).count() / static_cast<double>(step + 1 - start);
-    char line[256];
-    std::snprintf(line, sizeof line, "step %lld/%lld  loss %.5f  lr %.3e  %.2f s/step  ETA %s",
+    const double step_seconds = seconds_since(step_start);
+    const double mean_seconds = seconds_since(run_start) / static_cast<double>(step + 1 - start);
+    char line[384];
+    std::snprintf(line, sizeof line,
+                  "step %lld/%lld  loss %.5f  depth %.5f  match %.4f  top1 %.3f  lr %.3e  %.2f s/step "
+                  "(scenes %.2f, forward %.2f, backward %.2f; cpu %.2f s)  ETA %s",
                   static_cast<long long>(step + 1), static_cast<long long>(options.steps),
-                  loss.item<double>(), lr, step_seconds,
+                  loss.item<double>(), depth_loss.item<double>(), match_loss_value,
+                  counted > 0 ? top1 / counted : 0.0, lr, step_seconds, generate_seconds,
+                  forward_seconds, backward_seconds, CpuSeconds() - step_cpu_start,
                   FormatDuration(mean_seconds * static_cast<double>(options.steps - step - 1)).c_str());
     log.Line(line);
 
     const int64_t done = step + 1;
-    if (done % options.checkpoint_every == 0 || done == options.steps) {
+    const bool out_of_time =
+        options.max_cpu_minutes > 0 && CpuSeconds() - cpu_start >= 60.0 * options.max_cpu_minutes;
+    if (done % options.checkpoint_every == 0 || done == options.steps || out_of_time) {
       SaveCheckpoint(dir, done, net, config, optimizer, settings);
     }
     if (options.validate_every > 0 && done % options.validate_every == 0) {
       validate(done);
       last_validated = done;
     }
+    if (out_of_time) {
+      log.Line("stopping after step " + std::to_string(done) + ": --max_cpu_minutes reached");
+      final_step = done;
+      break;
+    }
   }
-  const int64_t final_step = std::max(start, options.steps);
   if (last_validated != final_step) validate(final_step);
   model::SaveModuleWeights(*net, config, (dir / "model.safetensors").string());
   log.Line("wrote " + (dir / "model.safetensors").string());
@@ -593,7 +765,7 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
   net->to(device);
   const auto scenes = ValidationScenes(options, device);
   std::vector<WideningResult> results;
-  for (double x : widenings) results.push_back({x, Validate(net, scenes, options, x)});
+  for (double x : widenings) results.push_back(Validate(net, scenes, options, x));
   return results;
 }
 

@@ -33,7 +33,10 @@ namespace dispmvs::train {
 constexpr uint64_t kDefaultValidationSeedBase = 1'000'000'000;
 
 struct TrainOptions {
-  std::string config = "small";  // model::ModelConfig: "paper" or "small"
+  // model::ModelConfig: "paper", "small" (the paper's random start) or
+  // "paper_v2", "small_v2" (model v2: range-free start from the best match
+  // along the epipolar segment, matching loss).
+  std::string config = "small";
   int64_t height = 128, width = 160;
   int64_t num_sources = 4;  // N: views per sample = N + 1
   int64_t batch_size = 1;
@@ -66,6 +69,29 @@ struct TrainOptions {
   // tensors must fit `config`. A run setting, identified by the file's
   // content (not its path); a resumed run takes the checkpoint's weights.
   std::string init_weights;
+  // Model v2 only: weight of the matching loss (cross-entropy of the
+  // correlation along the epipolar segment against the ground-truth match,
+  // coarse and fine stage; model/matching_loss.h) added to the sequence
+  // loss; and the first steps train with the matching loss alone (the
+  // features learn to match before the GRU learns to refine).
+  double matching_loss_weight = 0.5;
+  int64_t matching_warmup_steps = 0;
+  // Each generated scene serves this many consecutive steps, each time with
+  // another of its views as the reference (the others its sources): the
+  // ray-casting is paid once for R samples. 1 = a new scene every step.
+  int64_t scene_reuse = 1;
+  // GRU iterations of the coarse stage in training steps (0 = the config's):
+  // cheaper steps; validation and the saved weights keep the config's.
+  int64_t train_coarse_iterations = 0;
+  // Curriculum (synth::SynthConfig::difficulty): generated training scenes
+  // start at difficulty_start and reach full difficulty (1) linearly over
+  // difficulty_ramp_steps steps. Validation is always at full difficulty.
+  double difficulty_start = 1.0;
+  int64_t difficulty_ramp_steps = 0;
+  // Stop (checkpoint, validate, write model.safetensors) once this process
+  // has used this much CPU time (all threads), 0 = no limit: equal-CPU-time
+  // comparisons, and runs that must end before a deadline.
+  double max_cpu_minutes = 0;
   uint64_t seed = 0;
   std::string device = "cpu";  // "cpu", "cuda" or "cuda:<i>"
   int64_t threads = 0;         // intra-op threads; 0 = one per core
@@ -92,14 +118,21 @@ uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index);
 // [1, options.train_widening_max], a function of (seed, step) alone.
 double TrainingWideningAt(const TrainOptions& options, int64_t step);
 
+// The difficulty of the generated scenes of training step `step`.
+double TrainingDifficultyAt(const TrainOptions& options, int64_t step);
+
 // Runs (or resumes) training as described above. Log lines go to `log` and
 // to train.log. Throws std::invalid_argument on bad options and
 // std::runtime_error on I/O failure or a checkpoint from a different run.
 void Train(const TrainOptions& options, std::ostream& log);
 
 struct WideningResult {
-  double widening = 1;  // x: depth range hint (d_min / x, d_max * x)
+  double widening = 1;  // x: depth range hint (d_min / x, d_max * x); 0 = no hint
   DepthMetrics metrics;
+  // Coarse matching: share of ground-truth matches whose arg-max along the
+  // segment volume is within one 1/16 pixel (pairs counted: matching_count).
+  double coarse_top1 = 0;
+  double matching_count = 0;
 };
 
 // Evaluates the weights file (its config comes from the file's metadata) on
@@ -112,5 +145,7 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path,
 
 // One line per result: "x=2  <1%: 0.123  <2%: ...  AbsRel: ...  coverage: ...".
 std::string FormatMetrics(const DepthMetrics& metrics);
+// "coarse top-1: 0.4321".
+std::string FormatMatching(const WideningResult& result);
 
 }  // namespace dispmvs::train

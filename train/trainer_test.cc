@@ -103,7 +103,9 @@ TEST(TrainerTest, CheckpointFilesAreCompleteAndOldOnesRemoved) {
   const std::string log_file = ReadFileBytes(fs::path(options.checkpoint_dir) / "train.log");
   EXPECT_EQ(log_file, log.str());
   EXPECT_NE(log_file.find("step 3/3  loss "), std::string::npos);
-  EXPECT_NE(log_file.find("validate step 3  x=1  <1%: "), std::string::npos);
+  EXPECT_NE(log_file.find("validate step 3  cpu "), std::string::npos);
+  EXPECT_NE(log_file.find(" s  x=1  <1%: "), std::string::npos);
+  EXPECT_NE(log_file.find("coarse top-1: "), std::string::npos);
 }
 
 TEST(TrainerTest, ResumingWithDifferentSettingsIsRefused) {
@@ -134,6 +136,90 @@ TEST(TrainerTest, EvaluateWeightsGivesOneRowPerWidening) {
   EXPECT_EQ(rows[0].metrics.gt_pixels, rows[1].metrics.gt_pixels);
   EXPECT_GT(rows[0].metrics.gt_pixels, 0);
   EXPECT_GE(rows[0].metrics.coverage, rows[0].metrics.within_5);
+}
+
+TrainOptions TinyV2Options(const fs::path& dir, int64_t steps) {
+  TrainOptions o = TinyOptions(dir, steps);
+  o.config = "small_v2";
+  o.matching_warmup_steps = 1;
+  o.scene_reuse = 2;
+  o.train_coarse_iterations = 2;
+  o.difficulty_start = 0.5;
+  o.difficulty_ramp_steps = 4;
+  return o;
+}
+
+TEST(TrainerV2Test, MatchingLossWarmupSceneReuseAndCurriculumResumeBitForBit) {
+  TempDir tmp;
+  std::ostringstream log;
+  const auto straight_options = TinyV2Options(tmp.path() / "straight", 4);
+  Train(straight_options, log);
+  const std::string straight = ReadFileBytes(tmp.path() / "straight" / "model.safetensors");
+  // The matching loss is on (its value is logged, > 0) and the depth loss
+  // enters only after the warm-up step.
+  EXPECT_NE(log.str().find("step 1/4  loss "), std::string::npos) << log.str();
+  EXPECT_EQ(log.str().find("match 0.0000"), std::string::npos) << log.str();
+
+  const fs::path resumed_dir = tmp.path() / "resumed";
+  Train(TinyV2Options(resumed_dir, 2), log);
+  Train(TinyV2Options(resumed_dir, 4), log);
+  EXPECT_EQ(ReadFileBytes(resumed_dir / "model.safetensors"), straight);
+
+  // The saved configuration is the v2 one, with the config's iterations (not
+  // the 2 coarse iterations of the training steps).
+  const model::ModelConfig saved = model::ReadModelConfig((tmp.path() / "straight" / "model.safetensors").string());
+  EXPECT_EQ(saved.init, model::ModelConfig::Init::kMatch);
+  EXPECT_EQ(saved.coarse_iterations, model::ModelConfig::SmallV2().coarse_iterations);
+
+  // Other v2 settings are another run.
+  auto changed = TinyV2Options(resumed_dir, 6);
+  changed.scene_reuse = 3;
+  EXPECT_THROW(Train(changed, log), std::runtime_error);
+}
+
+TEST(TrainerV2Test, CpuBudgetStopsTheRunWithAModel) {
+  TempDir tmp;
+  auto options = TinyV2Options(tmp.path() / "run", 50);
+  options.max_cpu_minutes = 1e-6;
+  options.num_validation_scenes = 1;
+  std::ostringstream log;
+  Train(options, log);
+  EXPECT_NE(log.str().find("stopping after step 1: --max_cpu_minutes reached"), std::string::npos) << log.str();
+  EXPECT_NE(log.str().find("validate step 1  cpu "), std::string::npos) << log.str();
+  EXPECT_TRUE(fs::exists(tmp.path() / "run" / "model.safetensors"));
+  EXPECT_TRUE(fs::exists(tmp.path() / "run" / "checkpoint-000000001.safetensors"));
+}
+
+TEST(TrainerV2Test, EvaluationWithoutAHintOnlyForV2Weights) {
+  TempDir tmp;
+  std::ostringstream log;
+  auto v2 = TinyV2Options(tmp.path() / "v2", 1);
+  Train(v2, log);
+  auto paper = TinyOptions(tmp.path() / "paper", 1);
+  Train(paper, log);
+  TrainOptions eval = TinyOptions(tmp.path() / "unused", 1);
+  eval.checkpoint_dir.clear();
+  eval.num_validation_scenes = 1;
+  const auto rows = EvaluateWeights((tmp.path() / "v2" / "model.safetensors").string(), eval, {1, 0});
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[1].widening, 0);
+  EXPECT_GT(rows[1].metrics.gt_pixels, 0);
+  EXPECT_GT(rows[1].matching_count, 0);
+  EXPECT_GE(rows[1].coarse_top1, 0.0);
+  EXPECT_LE(rows[1].coarse_top1, 1.0);
+  EXPECT_THROW(EvaluateWeights((tmp.path() / "paper" / "model.safetensors").string(), eval, {0}),
+               std::invalid_argument);
+}
+
+TEST(TrainerV2Test, DifficultyRampsLinearlyToOne) {
+  TrainOptions o;
+  EXPECT_EQ(TrainingDifficultyAt(o, 0), 1.0);
+  o.difficulty_start = 0.2;
+  o.difficulty_ramp_steps = 10;
+  EXPECT_DOUBLE_EQ(TrainingDifficultyAt(o, 0), 0.2);
+  EXPECT_DOUBLE_EQ(TrainingDifficultyAt(o, 5), 0.6);
+  EXPECT_EQ(TrainingDifficultyAt(o, 10), 1.0);
+  EXPECT_EQ(TrainingDifficultyAt(o, 1000), 1.0);
 }
 
 void ExpectRejected(const TrainOptions& options, const std::string& needle) {
