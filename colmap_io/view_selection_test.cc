@@ -190,5 +190,154 @@ TEST(ViewSelectionTest, BadArgumentsThrow) {
   EXPECT_THROW(options.Check(), std::invalid_argument);
 }
 
+// ---- From the poses alone ----
+
+// A camera at (x, 0, 0) with an identity rotation: looking along +z, image
+// 100 x 100 with f = 100 and the principal point in the middle, so a point
+// (X, Y, Z) is inside its image iff |X - x| <= Z / 2 and |Y| <= Z / 2.
+struct RowScene {
+  ModelBuilder builder;
+  camera_t camera = builder.AddPinholeCamera(100, 100, 100, 100, 50, 50);
+  image_t AddForward(double x, const std::string& name) {
+    return builder.AddImageWithPose(camera, name, Eigen::Matrix3d::Identity(),
+                                    Eigen::Vector3d(-x, 0, 0));
+  }
+  // Looking along +z turned by `degrees` about the y axis, centre at (x, 0, 0).
+  image_t AddTurned(double x, double degrees, const std::string& name) {
+    const Eigen::Matrix3d R =
+        Eigen::AngleAxisd(Radians(degrees), Eigen::Vector3d::UnitY()).toRotationMatrix();
+    return builder.AddImageWithPose(camera, name, R, -R * Eigen::Vector3d(x, 0, 0));
+  }
+};
+
+TEST(PoseViewSelectionTest, RowOfForwardCamerasRanksNearestFirstAndDropsUselessViews) {
+  RowScene scene;
+  const image_t reference = scene.AddForward(0, "ref.png");
+  const image_t far = scene.AddForward(7, "far.png");
+  const image_t near = scene.AddForward(1, "near.png");
+  const image_t second = scene.AddForward(-2, "second.png");
+  const image_t third = scene.AddForward(4, "third.png");
+  // Same centre, turned 5 degrees: sees most samples, but every
+  // triangulation angle is 0.
+  const image_t same_centre = scene.AddTurned(0, 5, "same_centre.png");
+  // Beside the reference but looking back along -z: every sample (z >= 2)
+  // is behind it.
+  const image_t away = scene.AddTurned(0.5, 180, "away.png");
+
+  // Reference samples: X = u Z with u in {+-1/16, +-3/16, +-5/16, +-7/16}
+  // (the 8 columns), Z in [2, 100]. A view at x sees the ones with
+  // |u - x / Z| <= 1/2: for every depth, a window of width 1 over the u grid
+  // shifted by x / Z, which holds fewer grid values the larger |x| is (at
+  // Z = 2: 8 for x = 0, 4 for |x| = 1, none for |x| >= 2). So the counts
+  // fall strictly with the distance. The smallest angle of interest, x = 1
+  // at Z = 100, is still 0.57 degrees, and the 75th percentile is far above
+  // the 1 degree minimum.
+  const auto ranked = RankSourceViewsByPose(scene.builder.model(), reference, 2, 100);
+  ASSERT_EQ(ranked.size(), 4u);
+  EXPECT_EQ(ranked[0].image_id, near);
+  EXPECT_EQ(ranked[1].image_id, second);
+  EXPECT_EQ(ranked[2].image_id, third);
+  EXPECT_EQ(ranked[3].image_id, far);
+  EXPECT_GT(ranked[0].num_shared_samples, ranked[1].num_shared_samples);
+  EXPECT_GT(ranked[1].num_shared_samples, ranked[2].num_shared_samples);
+  EXPECT_GT(ranked[2].num_shared_samples, ranked[3].num_shared_samples);
+  for (const auto& candidate : ranked) {
+    EXPECT_GE(candidate.triangulation_angle_deg, 1.0);
+    EXPECT_NEAR(candidate.viewing_angle_deg, 0.0, 1e-9);
+  }
+  EXPECT_EQ(SelectSourceViewsByPose(scene.builder.model(), reference, 2, 2, 100),
+            (std::vector<image_t>{near, second}));
+
+  // Without the angle minimum the same-centre view is in (angle ~0), which
+  // shows the minimum is what kept it out; the view looking away is never in.
+  ViewSelectionOptions options;
+  options.min_triangulation_angle_deg = 0;
+  options.max_viewing_angle_deg = 180;
+  const auto all = RankSourceViewsByPose(scene.builder.model(), reference, 2, 100, options);
+  ASSERT_EQ(all.size(), 5u);
+  for (const auto& candidate : all) {
+    EXPECT_NE(candidate.image_id, away);
+    if (candidate.image_id == same_centre) {
+      EXPECT_NEAR(candidate.triangulation_angle_deg, 0.0, 1e-6);
+    }
+  }
+}
+
+TEST(PoseViewSelectionTest, ViewingAngleLimitExcludesTurnedViews) {
+  RowScene scene;
+  const image_t reference = scene.AddForward(0, "ref.png");
+  // At x = 2, turned 30 degrees towards the reference's axis (the world-to-
+  // camera rotation Ry(30) makes the optical axis, its third row,
+  // (-sin 30, 0, cos 30)): it sees the frustum well.
+  const image_t turned = scene.AddTurned(2, 30, "turned.png");
+  const auto ranked = RankSourceViewsByPose(scene.builder.model(), reference, 2, 100);
+  ASSERT_EQ(ranked.size(), 1u);
+  EXPECT_EQ(ranked[0].image_id, turned);
+  EXPECT_NEAR(ranked[0].viewing_angle_deg, 30.0, 1e-9);
+  ViewSelectionOptions options;
+  options.max_viewing_angle_deg = 29;
+  EXPECT_TRUE(RankSourceViewsByPose(scene.builder.model(), reference, 2, 100, options).empty());
+}
+
+TEST(PoseViewSelectionTest, SampleDepthsDecideWhatTheFrustaShare) {
+  RowScene scene;
+  const image_t reference = scene.AddForward(0, "ref.png");
+  const image_t side = scene.AddForward(3, "side.png");
+  // All samples at Z = 2: the view at x = 3 needs |u - 1.5| <= 0.5, no u of
+  // the grid reaches 1, so it shares nothing.
+  EXPECT_TRUE(RankSourceViewsByPose(scene.builder.model(), reference, 2, 2).empty());
+  // At Z = 20 it sees u >= 0.15 - 0.5, i.e. all but the column at -7/16.
+  const auto ranked = RankSourceViewsByPose(scene.builder.model(), reference, 20, 20);
+  ASSERT_EQ(ranked.size(), 1u);
+  EXPECT_EQ(ranked[0].image_id, side);
+  EXPECT_EQ(ranked[0].num_shared_samples,
+            static_cast<std::size_t>(kPoseSampleGrid * (kPoseSampleGrid - 1) * kPoseSampleDepths));
+}
+
+TEST(PoseViewSelectionTest, SharesSparsePointsNeedsAnotherObserver) {
+  CircleScene scene;
+  const image_t view = scene.AddViewAt(20, "v.png");
+  const image_t lonely = scene.AddViewAt(-20, "lonely.png");
+  scene.AddSharedPoints(3, {view});
+  scene.builder.AddPoint({0, 0, 0}, {lonely});  // seen by nobody else
+  EXPECT_TRUE(SharesSparsePoints(scene.builder.model(), scene.reference));
+  EXPECT_TRUE(SharesSparsePoints(scene.builder.model(), view));
+  EXPECT_FALSE(SharesSparsePoints(scene.builder.model(), lonely));
+  EXPECT_THROW(SharesSparsePoints(scene.builder.model(), 42), std::invalid_argument);
+}
+
+TEST(PoseViewSelectionTest, GuessedDepthsFollowTheTypicalBaseline) {
+  RowScene scene;
+  EXPECT_FALSE(GuessSampleDepthsFromPoses(scene.builder.model()).has_value());
+  scene.AddForward(0, "a.png");
+  EXPECT_FALSE(GuessSampleDepthsFromPoses(scene.builder.model()).has_value());
+  scene.AddTurned(0, 10, "a_turned.png");
+  EXPECT_FALSE(GuessSampleDepthsFromPoses(scene.builder.model()).has_value());  // baseline 0
+
+  RowScene row;
+  for (const double x : {0.0, 1.0, 3.0, 7.0}) row.AddForward(x, std::to_string(x) + ".png");
+  // Nearest-centre distances 1, 1, 2, 4; the median pick (index
+  // round(0.5 * 3) = 2 of the sorted list) is 2.
+  const auto depths = GuessSampleDepthsFromPoses(row.builder.model());
+  ASSERT_TRUE(depths.has_value());
+  EXPECT_NEAR(depths->first, 4.0, 1e-12);
+  EXPECT_NEAR(depths->second, 200.0, 1e-12);
+}
+
+TEST(PoseViewSelectionTest, BadArgumentsThrow) {
+  RowScene scene;
+  const image_t reference = scene.AddForward(0, "ref.png");
+  scene.AddForward(1, "b.png");
+  const auto& model = scene.builder.model();
+  EXPECT_THROW(RankSourceViewsByPose(model, 42, 1, 2), std::invalid_argument);
+  EXPECT_THROW(RankSourceViewsByPose(model, reference, 0, 2), std::invalid_argument);
+  EXPECT_THROW(RankSourceViewsByPose(model, reference, 3, 2), std::invalid_argument);
+  EXPECT_THROW(RankSourceViewsByPose(model, reference, 1, std::nan("")), std::invalid_argument);
+  ViewSelectionOptions options;
+  options.max_viewing_angle_deg = 0;
+  EXPECT_THROW(options.Check(), std::invalid_argument);
+  EXPECT_THROW(RankSourceViewsByPose(model, reference, 1, 2, options), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace dispmvs::colmap_io

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <optional>
 #include <set>
 #include <stdexcept>
 #include <system_error>
@@ -202,6 +203,16 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
     return summary;
   }
 
+  // A missing hint fails the whole pass here, not once per view.
+  std::vector<image_t> without_hint;
+  for (const StereoProblem* problem : todo) {
+    if (!plan.HintFor(problem->reference_image_id)) {
+      without_hint.push_back(problem->reference_image_id);
+    }
+  }
+  CheckHintsForWeights(
+      plan, without_hint,
+      DepthEstimator::CheckWeightsFile(options.estimator.model_path).needs_depth_range);
   DepthEstimator estimator(options.estimator);
   log << "photometric: network " << estimator.Describe() << '\n' << std::flush;
   const auto compute_start = Clock::now();
@@ -213,11 +224,9 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
     log << "photometric: [" << i + 1 << "/" << todo.size() << "] " << name << " ("
         << problem.source_image_ids.size() << " sources)";
     try {
-      const DepthRange hint = plan.HintFor(reference);
-      if (!hint.valid) {
-        throw std::runtime_error(
-            "no depth-range hint: no image sees sparse points; give --depth_min and --depth_max");
-      }
+      // None without sparse points or --depth_min/--depth_max: fine for
+      // model v2 weights (checked above for the others).
+      const std::optional<DepthRange> hint = plan.HintFor(reference);
       const std::vector<ProblemView> views =
           LoadProblemViews(workspace, plan, problem, options.max_image_size);
       const DepthEstimate estimate =

@@ -34,8 +34,31 @@ void CheckPinholeCameras(const SparseModel& model, const Workspace& workspace) {
   }
 }
 
+// What the pose-based source selection of `reference` samples: the image's
+// hint before widening (the widening tests the network, not the selection),
+// else depths guessed from the camera layout.
+std::optional<std::pair<double, double>> SampleDepthsFor(DensePlan* plan, image_t reference) {
+  if (plan->user_depth_range) {
+    return std::make_pair(plan->user_depth_range->d_min, plan->user_depth_range->d_max);
+  }
+  const auto own = plan->depth_ranges.find(reference);
+  if (own != plan->depth_ranges.end() && own->second.valid) {
+    return std::make_pair(own->second.d_min, own->second.d_max);
+  }
+  if (plan->fallback_depth_range.valid) {
+    return std::make_pair(plan->fallback_depth_range.d_min, plan->fallback_depth_range.d_max);
+  }
+  if (!plan->guessed_sample_depths) {
+    plan->guessed_sample_depths = GuessSampleDepthsFromPoses(plan->model);
+  }
+  return plan->guessed_sample_depths;
+}
+
 // The stereo problems: from patch-match.cfg, or `__auto__` for every image.
-// Applies --max_num_src_images to `__auto__` entries.
+// Applies --max_num_src_images to `__auto__` entries. An `__auto__` reference
+// sharing no sparse point with another image would get no source from
+// COLMAP's rule; it gets them from the camera poses instead (needs the
+// depth ranges: call after they are set).
 void PlanProblems(const Workspace& workspace, const PlanOptions& options, DensePlan* plan) {
   const std::filesystem::path config_path = workspace.PatchMatchConfigPath();
   std::vector<PatchMatchEntry> entries;
@@ -53,8 +76,25 @@ void PlanProblems(const Workspace& workspace, const PlanOptions& options, DenseP
       entry.sources.max_num_sources = std::min(entry.sources.max_num_sources, max_sources);
     }
   }
-  plan->problems = ResolvePatchMatchConfig(entries, plan->model, options.ViewSelection(),
-                                           config_path.string());
+  const ViewSelectionOptions view_selection = options.ViewSelection();
+  plan->problems =
+      ResolvePatchMatchConfig(entries, plan->model, view_selection, config_path.string());
+  // ResolvePatchMatchConfig gives one problem per entry, in order.
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    StereoProblem& problem = plan->problems[i];
+    if (entries[i].sources.kind != SourceSpec::Kind::kAuto ||
+        SharesSparsePoints(plan->model, problem.reference_image_id)) {
+      continue;
+    }
+    plan->pose_selected_references.insert(problem.reference_image_id);
+    const auto depths = SampleDepthsFor(plan, problem.reference_image_id);
+    // No depths (every centre equal): nothing triangulates, no sources.
+    problem.source_image_ids =
+        depths ? SelectSourceViewsByPose(plan->model, problem.reference_image_id,
+                                         entries[i].sources.max_num_sources, depths->first,
+                                         depths->second, view_selection)
+               : std::vector<image_t>{};
+  }
 }
 
 // Images missing on disk are reported once and dropped from every source
@@ -79,6 +119,17 @@ std::string FormatDepth(double depth) {
   char buffer[32];
   std::snprintf(buffer, sizeof(buffer), "%.6g", depth);
   return buffer;
+}
+
+// "a.png, b.png and 3 more": a line stays a line on big workspaces.
+std::string NameList(const DensePlan& plan, const std::vector<image_t>& ids) {
+  constexpr std::size_t kShown = 5;
+  std::string text;
+  for (std::size_t i = 0; i < ids.size() && i < kShown; ++i) {
+    text += (i == 0 ? "" : ", ") + plan.ImageOf(ids[i]).name;
+  }
+  if (ids.size() > kShown) text += " and " + std::to_string(ids.size() - kShown) + " more";
+  return text;
 }
 
 }  // namespace
@@ -146,22 +197,29 @@ DepthRangeOptions PlanOptions::DepthRange() const {
   return options;
 }
 
-DepthRange DensePlan::HintFor(image_t image_id, bool* is_fallback) const {
+std::optional<DepthRange> DensePlan::HintFor(image_t image_id, bool* is_fallback) const {
   if (is_fallback != nullptr) *is_fallback = false;
-  DepthRange hint = fallback_depth_range;
-  const auto own = depth_ranges.find(image_id);
+  DepthRange hint;
   if (user_depth_range) {
     hint = *user_depth_range;
-  } else if (own != depth_ranges.end() && own->second.valid) {
-    hint = own->second;
-  } else if (is_fallback != nullptr) {
-    *is_fallback = true;
+  } else if (HasOwnDepthRange(image_id)) {
+    hint = depth_ranges.at(image_id);
+  } else if (fallback_depth_range.valid) {
+    hint = fallback_depth_range;
+    if (is_fallback != nullptr) *is_fallback = true;
+  } else {
+    return std::nullopt;
   }
-  if (hint.valid && depth_range_widening != 1.0) {
+  if (depth_range_widening != 1.0) {
     hint.d_min /= depth_range_widening;
     hint.d_max *= depth_range_widening;
   }
   return hint;
+}
+
+bool DensePlan::HasOwnDepthRange(image_t image_id) const {
+  const auto own = depth_ranges.find(image_id);
+  return own != depth_ranges.end() && own->second.valid;
 }
 
 DensePlan PlanDenseReconstruction(const Workspace& workspace, const PlanOptions& options) {
@@ -172,8 +230,6 @@ DensePlan PlanDenseReconstruction(const Workspace& workspace, const PlanOptions&
     throw IoError(workspace.SparseDir().string(), "the sparse model has no registered images");
   }
   CheckPinholeCameras(plan.model, workspace);
-  PlanProblems(workspace, options, &plan);
-  DropMissingImages(workspace, &plan);
   plan.depth_ranges = ComputeDepthRanges(plan.model, options.DepthRange());
   plan.fallback_depth_range = FallbackDepthRange(plan.depth_ranges);
   if (options.depth_min > 0) {
@@ -184,6 +240,9 @@ DensePlan PlanDenseReconstruction(const Workspace& workspace, const PlanOptions&
     plan.user_depth_range = user;
   }
   plan.depth_range_widening = options.depth_range_widening;
+  // After the hints: pose-based source selection samples them.
+  PlanProblems(workspace, options, &plan);
+  DropMissingImages(workspace, &plan);
   return plan;
 }
 
@@ -222,15 +281,17 @@ void PrintPlan(const DensePlan& plan, std::ostream& out) {
   for (image_t missing : plan.missing_images) {
     out << "# warning: image file missing, not used: " << plan.ImageOf(missing).name << '\n';
   }
+  const std::string note = WithoutSparsePointsNote(plan);
+  if (!note.empty()) out << "# " << note << '\n';
   for (const StereoProblem& problem : plan.problems) {
     const Image& reference = plan.ImageOf(problem.reference_image_id);
     const auto own = plan.depth_ranges.find(problem.reference_image_id);
     bool fallback = false;
-    const colmap_io::DepthRange range = plan.HintFor(problem.reference_image_id, &fallback);
+    const auto range = plan.HintFor(problem.reference_image_id, &fallback);
 
     out << reference.name << '\t';
-    if (range.valid) {
-      out << "d_min=" << FormatDepth(range.d_min) << "\td_max=" << FormatDepth(range.d_max);
+    if (range) {
+      out << "d_min=" << FormatDepth(range->d_min) << "\td_max=" << FormatDepth(range->d_max);
     } else {
       out << "d_min=none\td_max=none";
     }
@@ -241,6 +302,7 @@ void PrintPlan(const DensePlan& plan, std::ostream& out) {
     } else if (fallback) {
       out << "\tfallback";
     }
+    if (plan.pose_selected_references.count(problem.reference_image_id) > 0) out << "\tposes";
     out << "\tsources=";
     for (std::size_t i = 0; i < problem.source_image_ids.size(); ++i) {
       out << (i == 0 ? "" : ",") << plan.ImageOf(problem.source_image_ids[i]).name;
@@ -248,6 +310,65 @@ void PrintPlan(const DensePlan& plan, std::ostream& out) {
     if (problem.source_image_ids.empty()) out << "(none: skipped, as COLMAP does)";
     out << '\n';
   }
+}
+
+std::string WithoutSparsePointsNote(const DensePlan& plan) {
+  std::vector<image_t> without_own, without_any, from_poses;
+  for (const StereoProblem& problem : plan.problems) {
+    const image_t id = problem.reference_image_id;
+    if (!plan.HasOwnDepthRange(id)) without_own.push_back(id);
+    if (!plan.HintFor(id)) without_any.push_back(id);
+    if (plan.pose_selected_references.count(id) > 0) from_poses.push_back(id);
+  }
+  if (without_own.empty() && from_poses.empty()) return "";
+  const std::size_t count = plan.problems.size();
+  std::string note = "planning without sparse points";
+  if (plan.model.points3D.empty()) note += " (the sparse model has no 3-D points)";
+  if (!without_own.empty()) {
+    note += ": " + std::to_string(without_own.size()) + " of " + std::to_string(count) +
+            " reference image(s) see none (" + NameList(plan, without_own) + ")";
+    if (plan.user_depth_range) {
+      note += "; depth-range hint from --depth_min/--depth_max";
+    } else if (without_any.empty()) {
+      note += "; their depth-range hint is the union of the other images' ranges";
+    } else if (without_any.size() == count) {
+      note += "; no depth-range hint (model v2 weights need none)";
+    } else {
+      note += "; without a depth-range hint: " + NameList(plan, without_any);
+    }
+  }
+  if (!from_poses.empty()) {
+    note += "; the __auto__ sources of " + std::to_string(from_poses.size()) +
+            " image(s) are chosen from the camera poses (overlap of the viewing frusta";
+    if (plan.guessed_sample_depths) {
+      note += " sampled at depths " + FormatDepth(plan.guessed_sample_depths->first) + " to " +
+              FormatDepth(plan.guessed_sample_depths->second) + ", guessed from the baselines";
+    }
+    note += ")";
+  }
+  return note;
+}
+
+std::vector<image_t> ReferencesWithoutHint(const DensePlan& plan) {
+  std::vector<image_t> ids;
+  for (const StereoProblem& problem : plan.problems) {
+    if (!problem.source_image_ids.empty() && !plan.HintFor(problem.reference_image_id)) {
+      ids.push_back(problem.reference_image_id);
+    }
+  }
+  return ids;
+}
+
+void CheckHintsForWeights(const DensePlan& plan, const std::vector<image_t>& without,
+                          bool weights_need_depth_range) {
+  if (!weights_need_depth_range || without.empty()) return;
+  throw std::invalid_argument(
+      "no depth-range hint for " + std::to_string(without.size()) + " reference image(s) (" +
+      NameList(plan, without) +
+      "): no image sees sparse points to derive one from, and these weights (init = "
+      "random, the paper's) draw their initialisation inside it; pass --depth_min and "
+      "--depth_max (the scene's depth range in the model's units; a rough, wide one is "
+      "enough), or use model v2 weights (init = match), which need no hint");
 }
 
 }  // namespace dispmvs::dense

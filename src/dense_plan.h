@@ -2,12 +2,22 @@
 // The plan of a dense reconstruction: the stereo problems (reference image,
 // source images) and the depth-range hint of every image, derived once from
 // the workspace and used by every pass of dispmvs_colmap.
+//
+// A workspace need not have sparse points (a model from known poses, or one
+// whose points3D were dropped): an image with no hint of its own gets the
+// union of the others' (FallbackDepthRange), and when no image has one and
+// the user gives none, it has NO hint (HintFor returns nullopt). Model v2
+// weights need none; the paper's weights do (CheckHintsForWeights). An
+// `__auto__` reference that shares no sparse point with another image gets
+// its sources from the camera poses (colmap_io::RankSourceViewsByPose).
 
 #include <cstddef>
 #include <map>
 #include <optional>
 #include <ostream>
+#include <set>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "colmap_io/depth_range.h"
@@ -58,11 +68,21 @@ struct DensePlan {
   // Images of the model whose file is missing from WS/images (they are left
   // out of every source list; a reference among them fails alone).
   std::vector<colmap_io::image_t> missing_images;
+  // References of `__auto__` entries that share no sparse point with any
+  // other image, whose sources were therefore chosen from the camera poses.
+  std::set<colmap_io::image_t> pose_selected_references;
+  // The depths the pose-based selection sampled when no hint said how far
+  // the scene is (colmap_io::GuessSampleDepthsFromPoses); unset otherwise.
+  std::optional<std::pair<double, double>> guessed_sample_depths;
 
   // The hint for `image_id`: the user's, else the image's own, else the
-  // fallback, widened by depth_range_widening. `is_fallback` (optional) says
-  // whether the fallback was used.
-  colmap_io::DepthRange HintFor(colmap_io::image_t image_id, bool* is_fallback = nullptr) const;
+  // fallback, widened by depth_range_widening; nullopt when there is none
+  // (no sparse points anywhere and no --depth_min/--depth_max).
+  // `is_fallback` (optional) says whether the fallback was used.
+  std::optional<colmap_io::DepthRange> HintFor(colmap_io::image_t image_id,
+                                               bool* is_fallback = nullptr) const;
+  // Whether the image's own sparse points gave it a range.
+  bool HasOwnDepthRange(colmap_io::image_t image_id) const;
   const colmap_io::Image& ImageOf(colmap_io::image_t image_id) const {
     return model.images.at(image_id);
   }
@@ -82,7 +102,28 @@ void RestrictToImages(const std::vector<std::string>& names, DensePlan* plan);
 // Keeps problem i when i % count == index (a shard of a batch job).
 void RestrictToShard(int index, int count, DensePlan* plan);
 
-// One tab-separated line per problem: NAME d_min= d_max= points= [fallback] sources=...
+// One tab-separated line per problem:
+//   NAME d_min= d_max= points= [user|fallback] [poses] sources=...
+// d_min=none d_max=none when the image has no hint; "poses" when its sources
+// come from the camera poses.
 void PrintPlan(const DensePlan& plan, std::ostream& out);
+
+// One line (no newline) saying that the plan was made without sparse points
+// for some references (which have no hint of their own, which have none at
+// all, whose sources come from the poses), or "" when every reference had
+// sparse points. dispmvs_colmap prints it before any pass.
+std::string WithoutSparsePointsNote(const DensePlan& plan);
+
+// The references with at least one source and no depth-range hint.
+std::vector<colmap_io::image_t> ReferencesWithoutHint(const DensePlan& plan);
+
+// Throws std::invalid_argument naming the images, telling the user to pass
+// --depth_min and --depth_max or to use model v2 weights, when
+// `weights_need_depth_range` and `without_hint` (references without a hint,
+// e.g. ReferencesWithoutHint(plan)) is not empty: better before the first
+// view than as one failure per view.
+void CheckHintsForWeights(const DensePlan& plan,
+                          const std::vector<colmap_io::image_t>& without_hint,
+                          bool weights_need_depth_range);
 
 }  // namespace dispmvs::dense

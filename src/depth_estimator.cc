@@ -123,13 +123,19 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
 
 DepthEstimator::~DepthEstimator() = default;
 
-void DepthEstimator::CheckWeightsFile(const std::string& model_path) {
+DepthEstimator::WeightsInfo DepthEstimator::CheckWeightsFile(const std::string& model_path) {
   try {
-    model::ReadModelConfig(model_path);
+    const model::ModelConfig config = model::ReadModelConfig(model_path);
+    WeightsInfo info;
+    info.name = config.name;
+    info.needs_depth_range = config.NeedsDepthRange();
+    return info;
   } catch (const std::exception& error) {
     throw std::runtime_error("cannot use the weights " + model_path + ": " + error.what());
   }
 }
+
+bool DepthEstimator::NeedsDepthRange() const { return impl_->config.NeedsDepthRange(); }
 
 std::string DepthEstimator::Describe() const {
   int64_t parameters = 0;
@@ -140,10 +146,18 @@ std::string DepthEstimator::Describe() const {
 }
 
 DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
-                                       const colmap_io::DepthRange& hint, uint64_t seed) {
+                                       const std::optional<colmap_io::DepthRange>& hint,
+                                       uint64_t seed) {
   if (views.size() < 2) throw std::invalid_argument("DepthEstimator: need a reference and a source");
-  if (!hint.valid || !(hint.d_min > 0) || !(hint.d_min < hint.d_max) || !std::isfinite(hint.d_max)) {
+  if (hint && (!hint->valid || !(hint->d_min > 0) || !(hint->d_min < hint->d_max) ||
+               !std::isfinite(hint->d_max))) {
     throw std::invalid_argument("DepthEstimator: invalid depth-range hint");
+  }
+  if (!hint && NeedsDepthRange()) {
+    throw std::invalid_argument(
+        "no depth-range hint, and the weights (" + impl_->config.name +
+        ", init = random) need one: pass --depth_min and --depth_max, or use model v2 weights "
+        "(init = match)");
   }
   const cv::Size size = views[0].image.size();
   std::vector<torch::Tensor> images, intrinsics, extrinsics;
@@ -160,8 +174,13 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
   input.images = torch::stack(images).unsqueeze(0).to(float_on_device);
   input.intrinsics = torch::stack(intrinsics).unsqueeze(0).to(float_on_device);
   input.extrinsics = torch::stack(extrinsics).unsqueeze(0).to(float_on_device);
-  input.depth_min = torch::tensor({hint.d_min}, torch::kFloat64).to(float_on_device);
-  input.depth_max = torch::tensor({hint.d_max}, torch::kFloat64).to(float_on_device);
+  // Without a hint the range tensors stay undefined: the network's "no depth
+  // range" (model v2). With one, it is passed even to weights that do not
+  // need it: harmless, and the loss and diagnostics may use it.
+  if (hint) {
+    input.depth_min = torch::tensor({hint->d_min}, torch::kFloat64).to(float_on_device);
+    input.depth_max = torch::tensor({hint->d_max}, torch::kFloat64).to(float_on_device);
+  }
 
   torch::NoGradGuard no_grad;
   // The initialisation is drawn on the CPU and moved, so CPU and CUDA runs

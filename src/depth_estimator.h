@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -58,15 +59,27 @@ class DepthEstimator {
   // views[0] is the reference, the others its sources (at least one); all
   // images have the reference's size. `seed` drives the random
   // initialisation, so a view's result does not depend on the order or the
-  // machine the views are processed on. The hint must be valid. Non-finite
-  // network outputs read as "no depth".
-  DepthEstimate Estimate(const std::vector<ProblemView>& views, const colmap_io::DepthRange& hint,
-                         uint64_t seed);
+  // machine the views are processed on. A given hint must be valid (0 <
+  // d_min < d_max, finite); it is always passed to the network. Without one
+  // the network gets no depth range, which model v2 weights (init = match)
+  // accept; weights that need one (NeedsDepthRange()) throw
+  // std::invalid_argument naming --depth_min. Non-finite network outputs
+  // read as "no depth".
+  DepthEstimate Estimate(const std::vector<ProblemView>& views,
+                         const std::optional<colmap_io::DepthRange>& hint, uint64_t seed);
 
+  // Whether the loaded weights need a depth-range hint (the paper's random
+  // initialisation) or not (model v2's initialisation from matches).
+  bool NeedsDepthRange() const;
+
+  struct WeightsInfo {
+    std::string name;                // the configuration's name, e.g. "small"
+    bool needs_depth_range = true;   // see NeedsDepthRange()
+  };
   // Reads only the header of the weights file: throws std::runtime_error
   // ("cannot use the weights PATH: ...") when it is missing or malformed, so
   // a run can fail before it prints or writes anything.
-  static void CheckWeightsFile(const std::string& model_path);
+  static WeightsInfo CheckWeightsFile(const std::string& model_path);
 
   // "small, 1675558 parameters, 8+2 iterations, cpu" for logs.
   std::string Describe() const;

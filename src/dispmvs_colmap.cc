@@ -55,8 +55,25 @@ interruption; --overwrite recomputes); files are written under a temporary
 name and renamed, so an interrupted run leaves no half-written file.
 
 Depth range: each image's range comes from the sparse points it sees (COLMAP's
-percentiles and margin), or from --depth_min/--depth_max. DispMVS uses it only
-to draw its random initialisation: nothing outside it is clipped or dropped.
+percentiles and margin; an image seeing none takes the union of the others'),
+or from --depth_min/--depth_max. It is only a hint: nothing outside it is
+clipped or dropped. The paper's weights (init = random, the shipped ones)
+draw their initialisation inside it, so they need one; model v2 weights
+(init = match) start from the best match along each epipolar line and need
+none. A workspace with no sparse points at all (a model from known poses)
+therefore works as it is with v2 weights, and with --depth_min/--depth_max
+with the others (without them the run stops before any work).
+
+Source views: `__auto__, N` takes COLMAP's rule, the N images sharing the
+most sparse points with the reference at a triangulation angle of at least
+--min_triangulation_angle. A reference sharing no sparse point with any image
+gets its sources from the camera poses instead: reference pixels are
+back-projected to depths inside its hint (without one: 2 to 100 times the
+typical distance between neighbouring cameras), and the images seeing most of
+these samples, turned at most 60 degrees from the reference and at the same
+minimum triangulation angle, are taken. `--mode plan` marks them "poses" and
+shows "d_min=none" for images without a hint. Explicit lists and `__all__`
+in patch-match.cfg are used as written.
 
 Modes (--mode):
   full         photometric, geometric and fusion (default)
@@ -159,9 +176,12 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("min_triangulation_angle", po::value<double>(&o.plan.min_triangulation_angle)
            ->default_value(o.plan.min_triangulation_angle, "1"),
        "Degrees; `__auto__` ignores sources whose triangulation angle with the reference "
-       "(75th percentile over shared points) is smaller.")
+       "(75th percentile over shared points, or over frustum samples when chosen from "
+       "the poses) is smaller.")
       ("depth_min", po::value<double>(&o.plan.depth_min)->default_value(-1),
-       "Depth-range hint for every image (with --depth_max) instead of the sparse points'.")
+       "Depth-range hint for every image (with --depth_max) instead of the sparse points'. "
+       "Needed by the paper's weights (init = random) on a workspace without sparse points; "
+       "optional with model v2 weights (init = match).")
       ("depth_max", po::value<double>(&o.plan.depth_max)->default_value(-1),
        "See --depth_min.")
       ("depth_range_widening", po::value<double>(&o.plan.depth_range_widening)
@@ -258,8 +278,9 @@ void PrintPassSummary(const char* pass, const dense::PassSummary& summary, std::
 
 int Run(const Options& options) {
   const auto start = std::chrono::steady_clock::now();
+  std::optional<dense::DepthEstimator::WeightsInfo> weights;
   if (options.mode == "full" || options.mode == "photometric") {
-    dense::DepthEstimator::CheckWeightsFile(options.photometric.estimator.model_path);
+    weights = dense::DepthEstimator::CheckWeightsFile(options.photometric.estimator.model_path);
   }
   const colmap_io::Workspace workspace(options.workspace_path);
   dense::DensePlan plan = dense::PlanDenseReconstruction(workspace, options.plan);
@@ -278,8 +299,16 @@ int Run(const Options& options) {
     dense::ExportForColmap(workspace, plan, options.export_path, std::cout);
     return 0;
   }
+  // Weights that need a hint and images without one: stop before anything
+  // is printed or written.
+  if (weights) {
+    dense::CheckHintsForWeights(plan, dense::ReferencesWithoutHint(plan),
+                                weights->needs_depth_range);
+  }
   std::cout << "plan: " << plan.problems.size() << " reference image(s) from "
             << plan.problems_source << '\n';
+  const std::string note = dense::WithoutSparsePointsNote(plan);
+  if (!note.empty()) std::cout << "plan: " << note << '\n';
   for (auto image_id : plan.missing_images) {
     std::cout << "warning: image file missing, not used: " << plan.ImageOf(image_id).name << '\n';
   }

@@ -15,7 +15,16 @@
 #   Shared points: a-b 4, a-c 2, b-c 2; the pairs' triangulation angles
 #   (75th percentile over shared points) are about 11, 23 and 11 degrees. So
 #   __auto__ gives a: b, c; b: a, c; c: a, b (tie broken by id); d: nothing
-#   (skipped); and a 60 degree minimum leaves nobody any source.
+#   (skipped) from the sparse points, so its sources come from the poses:
+#   the fallback hint [3, 10] is sampled, and the nearer a camera the more
+#   of d's frustum it sees (colmap_io/view_selection.h): c, b, a. A 60 degree
+#   minimum leaves nobody any source.
+#
+# "plan_no_points" is the same workspace without any point: no image has a
+# hint (d_min=none), every __auto__ source list comes from the poses (sampled
+# at 2 to 100 times the typical baseline 1), nearest cameras first.
+# "example_no_points" runs the program on the embedded example with its
+# sparse points dropped (-DMAKE_EXAMPLE, -DDROP_POINTS).
 
 cmake_minimum_required(VERSION 3.18)
 
@@ -96,6 +105,8 @@ if(CASE STREQUAL "help")
   expect_contains("${out}" "patch-match.cfg")
   expect_contains("${out}" "--mode")
   expect_contains("${out}" "--shard")
+  expect_contains("${out}" "no sparse points at all")
+  expect_contains("${out}" "from the camera poses")
 elseif(CASE STREQUAL "missing_workspace_option")
   run_program()
   expect_error_line("--workspace_path is required")
@@ -140,16 +151,19 @@ elseif(CASE STREQUAL "plan_auto")
   expect_contains("${out}" "a.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=sub/b.png,c.png\n")
   expect_contains("${out}" "sub/b.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=a.png,c.png\n")
   expect_contains("${out}" "c.png${tab}d_min=3.75${tab}d_max=7.5${tab}points=2${tab}sources=a.png,sub/b.png\n")
-  expect_contains("${out}" "d.png${tab}d_min=3${tab}d_max=10${tab}points=0${tab}fallback${tab}sources=(none")
+  expect_contains("${out}" "d.png${tab}d_min=3${tab}d_max=10${tab}points=0${tab}fallback${tab}poses${tab}sources=c.png,sub/b.png,a.png\n")
+  expect_contains("${out}" "# planning without sparse points: 1 of 4 reference image(s) see none (d.png); their depth-range hint is the union")
   # --max_num_src_images caps __auto__.
   run_program(--mode plan --workspace_path "${ws}" --max_num_src_images 1)
   expect_rc(0)
   expect_contains("${out}" "a.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=sub/b.png\n")
   expect_contains("${out}" "c.png${tab}d_min=3.75${tab}d_max=7.5${tab}points=2${tab}sources=a.png\n")
+  expect_contains("${out}" "d.png${tab}d_min=3${tab}d_max=10${tab}points=0${tab}fallback${tab}poses${tab}sources=c.png\n")
   # A triangulation angle nobody reaches leaves every image without sources.
   run_program(--mode plan --workspace_path "${ws}" --min_triangulation_angle 60)
   expect_rc(0)
   expect_contains("${out}" "a.png${tab}d_min=3${tab}d_max=10${tab}points=4${tab}sources=(none")
+  expect_contains("${out}" "d.png${tab}d_min=3${tab}d_max=10${tab}points=0${tab}fallback${tab}poses${tab}sources=(none")
   # --depth_range_widening x gives [d_min / x, d_max * x] to every hint,
   # the fallback and the user's included.
   run_program(--mode plan --workspace_path "${ws}" --depth_range_widening 2)
@@ -220,6 +234,116 @@ elseif(CASE STREQUAL "plan_errors")
   file(REMOVE_RECURSE "${ws}/sparse")
   run_program(--mode plan --workspace_path "${ws}")
   expect_error_line("sparse folder of the workspace does not exist")
+elseif(CASE STREQUAL "plan_no_points")
+  make_workspace("${ws}")
+  file(WRITE "${ws}/sparse/points3D.txt" "# 3D point list\n")
+  file(WRITE "${ws}/sparse/images.txt"
+    "# Image list\n"
+    "1 1 0 0 0 0 0 0 1 a.png\n\n"
+    "2 1 0 0 0 -1 0 0 1 sub/b.png\n\n"
+    "3 1 0 0 0 -2 0 0 1 c.png\n\n"
+    "4 1 0 0 0 -3 0 0 1 d.png\n\n")
+  run_program(--mode plan --workspace_path "${ws}")
+  expect_rc(0)
+  expect_contains("${out}" "# 4 images, 0 sparse points")
+  expect_contains("${out}" "# planning without sparse points (the sparse model has no 3-D points): 4 of 4 reference image(s) see none (a.png, sub/b.png, c.png, d.png); no depth-range hint")
+  expect_contains("${out}" "chosen from the camera poses")
+  expect_contains("${out}" "sampled at depths 2 to 100, guessed from the baselines")
+  # Centres at x = 0 and 3 have no tie: nearest first.
+  expect_contains("${out}" "a.png${tab}d_min=none${tab}d_max=none${tab}points=0${tab}poses${tab}sources=sub/b.png,c.png,d.png\n")
+  expect_contains("${out}" "d.png${tab}d_min=none${tab}d_max=none${tab}points=0${tab}poses${tab}sources=c.png,sub/b.png,a.png\n")
+  run_program(--mode plan --workspace_path "${ws}" --max_num_src_images 2)
+  expect_rc(0)
+  expect_contains("${out}" "a.png${tab}d_min=none${tab}d_max=none${tab}points=0${tab}poses${tab}sources=sub/b.png,c.png\n")
+  # The user's range is the hint and what the selection samples.
+  run_program(--mode plan --workspace_path "${ws}" --depth_min 2 --depth_max 8)
+  expect_rc(0)
+  expect_contains("${out}" "a.png${tab}d_min=2${tab}d_max=8${tab}points=0${tab}user${tab}poses${tab}sources=sub/b.png,c.png,d.png\n")
+  expect_contains("${out}" "depth-range hint from --depth_min/--depth_max")
+  # Explicit lists are used as written; __auto__ entries still use the poses.
+  file(WRITE "${ws}/stereo/patch-match.cfg" "a.png\nc.png, d.png\nd.png\n__auto__, 1\n")
+  run_program(--mode plan --workspace_path "${ws}")
+  expect_rc(0)
+  expect_contains("${out}" "a.png${tab}d_min=none${tab}d_max=none${tab}points=0${tab}sources=c.png,d.png\n")
+  expect_contains("${out}" "d.png${tab}d_min=none${tab}d_max=none${tab}points=0${tab}poses${tab}sources=c.png\n")
+  expect_contains("${out}" "the __auto__ sources of 1 image(s) are chosen from the camera poses")
+  # All centres equal: nothing triangulates, nobody gets a source.
+  file(REMOVE "${ws}/stereo/patch-match.cfg")
+  file(WRITE "${ws}/sparse/images.txt"
+    "# Image list\n"
+    "1 1 0 0 0 0 0 0 1 a.png\n\n"
+    "2 1 0.9961947 0 0.0871557 0 0 0 1 sub/b.png\n\n")
+  run_program(--mode plan --workspace_path "${ws}")
+  expect_rc(0)
+  expect_contains("${out}" "a.png${tab}d_min=none${tab}d_max=none${tab}points=0${tab}poses${tab}sources=(none")
+elseif(CASE STREQUAL "example_no_points")
+  foreach(var MAKE_EXAMPLE DROP_POINTS)
+    if(NOT DEFINED ${var})
+      message(FATAL_ERROR "dispmvs_colmap_cli_test: -D${var}=... is required for ${CASE}")
+    endif()
+  endforeach()
+  file(REMOVE_RECURSE "${ws}")
+  execute_process(COMMAND "${MAKE_EXAMPLE}" --output_path "${ws}" --seed 1
+                          --ground_truth_sampling colmap-dense
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  expect_rc(0)
+  execute_process(COMMAND "${DROP_POINTS}" "${ws}/sparse"
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  expect_rc(0)
+
+  # (a) The plan: no hint anywhere, the example's `__auto__, 4` from the poses.
+  run_program(--mode plan --workspace_path "${ws}")
+  expect_rc(0)
+  expect_contains("${out}" "0 sparse points")
+  expect_contains("${out}" "(the sparse model has no 3-D points): 7 of 7 reference image(s) see none")
+  # The example's views view_00 .. view_06 are taken along a path around the
+  # scene, so every view's first source must be a neighbour on that path,
+  # and each gets at least 3 of its 4 sources (the two ends of the path see
+  # less of the far ones).
+  string(REGEX MATCHALL "view_0[0-9].png${tab}d_min=none${tab}d_max=none${tab}points=0${tab}poses${tab}sources=[^\n]+\n"
+         lines "${out}")
+  list(LENGTH lines count)
+  if(NOT count EQUAL 7)
+    message(FATAL_ERROR "expected 7 references with pose-chosen sources, got ${count}:\n${out}")
+  endif()
+  foreach(line IN LISTS lines)
+    if(NOT line MATCHES "^view_0([0-9]).png${tab}.*sources=view_0([0-9]).png,[^,\n]+,[^,\n]+")
+      message(FATAL_ERROR "fewer than 3 sources: ${line}\n${out}")
+    endif()
+    math(EXPR step "${CMAKE_MATCH_1} - ${CMAKE_MATCH_2}")
+    if(NOT (step EQUAL 1 OR step EQUAL -1))
+      message(FATAL_ERROR "first source is not a neighbour on the path: ${line}")
+    endif()
+  endforeach()
+  # The first reference, for the runs below.
+  string(REGEX MATCH "\n([^#\n${tab}][^\n${tab}]*)${tab}d_min=none" first "${out}")
+  set(reference "${CMAKE_MATCH_1}")
+  if(reference STREQUAL "")
+    message(FATAL_ERROR "no reference line in the plan:\n${out}")
+  endif()
+
+  # (b) The shipped weights are the paper's (init = random; when the shipped
+  # ones become model v2 this run must succeed instead): they need a hint,
+  # so the run stops before any work with a message naming the options.
+  run_program(--workspace_path "${ws}" --threads 2)
+  expect_error_line("--depth_min and --depth_max")
+  expect_contains("${err}" "model v2")
+  file(GLOB written "${ws}/stereo/depth_maps/*.dispmvs.*")
+  if(written)
+    message(FATAL_ERROR "maps written although the run failed: ${written}")
+  endif()
+
+  # (c) With a user range (the scene's depths are 3 to 10), one view runs.
+  file(WRITE "${WORK_DIR}/list.txt" "${reference}\n")
+  run_program(--mode photometric --workspace_path "${ws}" --depth_min 2 --depth_max 12
+              --image_list "${WORK_DIR}/list.txt" --max_image_size 160 --threads 2)
+  expect_rc(0)
+  expect_contains("${out}" "plan: planning without sparse points")
+  expect_contains("${out}" "depth-range hint from --depth_min/--depth_max")
+  expect_contains("${out}" "photometric: 1 done")
+  if(NOT EXISTS "${ws}/stereo/depth_maps/${reference}.dispmvs.photometric.bin")
+    message(FATAL_ERROR "no depth map for ${reference}:\n${out}")
+  endif()
 else()
   message(FATAL_ERROR "unknown CASE ${CASE}")
 endif()

@@ -1,0 +1,113 @@
+// DepthEstimator with and without a depth-range hint, on weights written
+// here from randomly initialised networks (accuracy is not the point: the
+// shapes, the finiteness and which configurations accept no hint are).
+
+#include "src/depth_estimator.h"
+
+#include <cmath>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <torch/torch.h>
+
+#include "model/config.h"
+#include "model/dispmvs_net.h"
+#include "model/safetensors.h"
+#include "tests/support/temp_dir.h"
+
+namespace dispmvs::dense {
+namespace {
+
+constexpr int kWidth = 64;
+constexpr int kHeight = 48;
+
+// Weights of a freshly initialised network of `config`, in `dir`.
+std::string WriteRandomWeights(const model::ModelConfig& config, const testing::TempDir& dir) {
+  torch::manual_seed(7);
+  model::DispMvsNet net(config);
+  const std::string path = (dir.path() / (config.name + ".safetensors")).string();
+  model::SaveModuleWeights(*net, config, path);
+  return path;
+}
+
+// A reference and two sources beside it (centres at x = 0, -0.3, 0.3), all
+// looking along +z at a textured image; f = 60 px.
+std::vector<ProblemView> SmallProblem() {
+  std::vector<ProblemView> views;
+  cv::RNG rng(3);
+  for (const double x : {0.0, -0.3, 0.3}) {
+    ProblemView view;
+    view.image = cv::Mat(kHeight, kWidth, CV_32FC3);
+    rng.fill(view.image, cv::RNG::UNIFORM, 0.0, 1.0);
+    view.K << 60, 0, kWidth / 2.0, 0, 60, kHeight / 2.0, 0, 0, 1;
+    view.R = Eigen::Matrix3d::Identity();
+    view.t = Eigen::Vector3d(-x, 0, 0);
+    views.push_back(view);
+  }
+  return views;
+}
+
+EstimatorOptions OptionsFor(const std::string& path) {
+  EstimatorOptions options;
+  options.model_path = path;
+  options.threads = 1;  // the test machines are small and shared
+  return options;
+}
+
+colmap_io::DepthRange Hint(double d_min, double d_max) {
+  colmap_io::DepthRange hint;
+  hint.d_min = d_min;
+  hint.d_max = d_max;
+  hint.valid = true;
+  return hint;
+}
+
+void ExpectUsableEstimate(const DepthEstimate& estimate) {
+  ASSERT_EQ(estimate.depth.width(), kWidth);
+  ASSERT_EQ(estimate.depth.height(), kHeight);
+  ASSERT_EQ(estimate.depth.channels(), 1);
+  ASSERT_EQ(estimate.confidence.width(), kWidth);
+  ASSERT_EQ(estimate.confidence.height(), kHeight);
+  for (const float d : estimate.depth.values()) {
+    ASSERT_TRUE(std::isfinite(d) && d >= 0.0f) << d;
+  }
+  for (const float c : estimate.confidence.values()) {
+    ASSERT_TRUE(c >= 0.0f && c <= 1.0f) << c;
+  }
+}
+
+TEST(DepthEstimatorTest, PaperWeightsNeedAHint) {
+  const testing::TempDir dir;
+  const std::string path = WriteRandomWeights(model::ModelConfig::Small(), dir);
+  EXPECT_TRUE(DepthEstimator::CheckWeightsFile(path).needs_depth_range);
+  DepthEstimator estimator(OptionsFor(path));
+  EXPECT_TRUE(estimator.NeedsDepthRange());
+  try {
+    estimator.Estimate(SmallProblem(), std::nullopt, 1);
+    FAIL() << "no hint accepted by weights that need one";
+  } catch (const std::invalid_argument& error) {
+    EXPECT_NE(std::string(error.what()).find("--depth_min"), std::string::npos) << error.what();
+  }
+  // A given hint must still make sense.
+  EXPECT_THROW(estimator.Estimate(SmallProblem(), Hint(5, 2), 1), std::invalid_argument);
+  ExpectUsableEstimate(estimator.Estimate(SmallProblem(), Hint(2, 20), 1));
+}
+
+// Needs model v2's forward() (undefined depth_min/depth_max accepted when
+// !NeedsDepthRange()).
+TEST(DepthEstimatorTest, ModelV2WeightsRunWithoutAHint) {
+  const testing::TempDir dir;
+  const std::string path = WriteRandomWeights(model::ModelConfig::SmallV2(), dir);
+  EXPECT_FALSE(DepthEstimator::CheckWeightsFile(path).needs_depth_range);
+  DepthEstimator estimator(OptionsFor(path));
+  EXPECT_FALSE(estimator.NeedsDepthRange());
+  ExpectUsableEstimate(estimator.Estimate(SmallProblem(), std::nullopt, 1));
+  // A hint is still accepted (and passed on).
+  ExpectUsableEstimate(estimator.Estimate(SmallProblem(), Hint(2, 20), 1));
+}
+
+}  // namespace
+}  // namespace dispmvs::dense
