@@ -322,16 +322,31 @@ elseif(CASE STREQUAL "example_no_points")
     message(FATAL_ERROR "no reference line in the plan:\n${out}")
   endif()
 
-  # (b) The shipped weights are the paper's (init = random; when the shipped
-  # ones become model v2 this run must succeed instead): they need a hint,
-  # so the run stops before any work with a message naming the options.
-  run_program(--workspace_path "${ws}" --threads 2)
+  # (b) The paper's weights (init = random, shipped beside the default ones)
+  # need a hint, so the run stops before any work with a message naming the
+  # options.
+  run_program(--workspace_path "${ws}" --threads 2 --model_path "${PAPER_MODEL}")
   expect_error_line("--depth_min and --depth_max")
   expect_contains("${err}" "model v2")
   file(GLOB written "${ws}/stereo/depth_maps/*.dispmvs.*")
   if(written)
     message(FATAL_ERROR "maps written although the run failed: ${written}")
   endif()
+
+  # (b2) The default weights are model v2's (init = match): without any
+  # hint, one view runs.
+  file(WRITE "${WORK_DIR}/list.txt" "${reference}\n")
+  run_program(--mode photometric --workspace_path "${ws}" --image_list "${WORK_DIR}/list.txt"
+              --max_image_size 160 --threads 2)
+  expect_rc(0)
+  expect_contains("${out}" "plan: planning without sparse points")
+  expect_contains("${out}" "photometric: 1 done")
+  if(NOT EXISTS "${ws}/stereo/depth_maps/${reference}.dispmvs.photometric.bin")
+    message(FATAL_ERROR "no depth map for ${reference} without a hint:\n${out}")
+  endif()
+  # Remove its maps so that (c) computes the view again.
+  file(GLOB maps "${ws}/stereo/*/${reference}.dispmvs.*")
+  file(REMOVE ${maps})
 
   # (c) With a user range (the scene's depths are 3 to 10), one view runs.
   file(WRITE "${WORK_DIR}/list.txt" "${reference}\n")
