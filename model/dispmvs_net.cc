@@ -91,6 +91,18 @@ torch::Tensor Crop(const torch::Tensor& x, int64_t height, int64_t width) {
   return x.narrow(2, 0, height).narrow(3, 0, width);
 }
 
+// images [B,V,3,H,W] -> [B*V,3,H',W'] padded bottom/right to multiples of
+// `multiple` by replicating the border (pixel-index intrinsics stay valid).
+torch::Tensor PadViews(const torch::Tensor& images, int64_t multiple) {
+  const int64_t b = images.size(0), v = images.size(1), height = images.size(3), width = images.size(4);
+  const int64_t padded_h = (height + multiple - 1) / multiple * multiple;
+  const int64_t padded_w = (width + multiple - 1) / multiple * multiple;
+  torch::Tensor flat = images.reshape({b * v, 3, height, width});
+  if (padded_h == height && padded_w == width) return flat;
+  return F::pad(flat, F::PadFuncOptions({0, padded_w - width, 0, padded_h - height})
+                          .mode(torch::kReplicate));
+}
+
 // [B, ...] -> [B*N, ...], each batch entry repeated for its N sources
 // (index b*N + i), matching the layout of the batched source views.
 torch::Tensor RepeatPerSource(const torch::Tensor& x, int64_t sources) {
@@ -398,24 +410,17 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   const int64_t n = v - 1;
   const int64_t height = input.images.size(3);
   const int64_t width = input.images.size(4);
-  const int64_t padded_h = (height + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
-  const int64_t padded_w = (width + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
   const bool has_hint = input.depth_min.defined();
   const torch::Tensor d_min = has_hint ? input.depth_min.to(opts) : torch::Tensor();
   const torch::Tensor d_max = has_hint ? input.depth_max.to(opts) : torch::Tensor();
   const bool keep_every_iteration = is_training();
 
-  // Pad bottom/right: pixel-index intrinsics stay valid.
-  torch::Tensor images = input.images.reshape({b * v, 3, height, width});
-  if (padded_h != height || padded_w != width) {
-    images = F::pad(images, F::PadFuncOptions({0, padded_w - width, 0, padded_h - height})
-                                .mode(torch::kReplicate));
-  }
+  const torch::Tensor images = PadViews(input.images, kCoarseStride);
   StageTimer* const timer = stage_timer_;
   const FeaturePyramid matching =
       Timed(timer, NetStage::kEncoders, [&] { return matching_encoder_->forward(images); });
   const FeaturePyramid context = Timed(timer, NetStage::kEncoders, [&] {
-    return context_encoder_->forward(images.view({b, v, 3, padded_h, padded_w}).select(1, 0));
+    return context_encoder_->forward(images.view({b, v, 3, images.size(2), images.size(3)}).select(1, 0));
   });
   const auto split = [&](const torch::Tensor& f, torch::Tensor& ref, torch::Tensor& src) {
     const torch::Tensor views = f.view({b, v, f.size(1), f.size(2), f.size(3)});
@@ -532,14 +537,7 @@ StageMatching DispMvsNetImpl::CoarseMatching(const DispMvsInput& input) {
   CheckInput(input, /*needs_depth_range=*/false);
   const torch::TensorOptions opts = input.images.options();
   const int64_t b = input.images.size(0), v = input.images.size(1), n = v - 1;
-  const int64_t height = input.images.size(3), width = input.images.size(4);
-  const int64_t padded_h = (height + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
-  const int64_t padded_w = (width + kCoarseStride - 1) / kCoarseStride * kCoarseStride;
-  torch::Tensor images = input.images.reshape({b * v, 3, height, width});
-  if (padded_h != height || padded_w != width) {
-    images = F::pad(images, F::PadFuncOptions({0, padded_w - width, 0, padded_h - height})
-                                .mode(torch::kReplicate));
-  }
+  const torch::Tensor images = PadViews(input.images, kCoarseStride);
   const torch::Tensor coarse = matching_encoder_->forward(images).coarse;
   const int64_t c = coarse.size(1), h = coarse.size(2), w = coarse.size(3);
   const torch::Tensor views = coarse.view({b, v, c, h, w});

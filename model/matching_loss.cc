@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "model/dispmvs_net.h"  // ReferenceToSourcePoses
 #include "model/grid_coordinates.h"
 #include "model/segment_correlation.h"
 
@@ -66,19 +67,12 @@ GroundTruthMatches ComputeGroundTruthMatches(const torch::Tensor& depths,
   // cell (i, j) with StridedIntrinsics(K_ref, stride) is exactly the
   // full-resolution pixel (stride*i, stride*j).
   const torch::Tensor K = intrinsics.to(opts);
-  const torch::Tensor E = extrinsics.to(opts);
-  const torch::Tensor R_all = E.narrow(2, 0, 3).narrow(3, 0, 3);
-  const torch::Tensor T_all = E.narrow(2, 0, 3).select(3, 3);
-  const torch::Tensor R_ref = R_all.select(1, 0).unsqueeze(1);
-  const torch::Tensor T_ref = T_all.select(1, 0).unsqueeze(1);
-  const torch::Tensor R = torch::matmul(R_all.narrow(1, 1, n), R_ref.transpose(2, 3));
-  const torch::Tensor T =
-      T_all.narrow(1, 1, n) - torch::matmul(R, T_ref.unsqueeze(-1)).squeeze(-1);
+  const RelativePoses poses = ReferenceToSourcePoses(extrinsics.to(opts));
   const torch::Tensor K_ref_stage =
       StridedIntrinsics(K.select(1, 0), static_cast<double>(stride)).unsqueeze(1).expand({b, n, 3, 3});
   const EpipolarPair full = MakeEpipolarPair(
       K_ref_stage.reshape({b * n, 3, 3}), K.narrow(1, 1, n).reshape({b * n, 3, 3}),
-      R.reshape({b * n, 3, 3}), T.reshape({b * n, 3}), h, w);
+      poses.R.reshape({b * n, 3, 3}), poses.T.reshape({b * n, 3}), h, w);
 
   const torch::Tensor ref_rep =
       ref_depth.unsqueeze(1).expand({b, n, 1, h, w}).reshape({b * n, 1, h, w});

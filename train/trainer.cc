@@ -431,18 +431,32 @@ std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, to
   return scenes;
 }
 
-// Top-1 accuracy of the coarse segment volume: (hits, counted pairs).
-std::pair<double, double> CoarseMatchingHits(DispMvsNet& net, const TrainingBatch& batch) {
-  const model::StageMatching matching = net->CoarseMatching(batch.input);
-  const auto truth = model::ComputeGroundTruthMatches(
-      batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, matching.stride,
-      matching.logits.size(2), matching.logits.size(3));
-  const auto result = model::MatchingLoss(matching, truth);
-  return {result.top1, result.count};
+// Coarse matching accuracy on the validation scenes (WideningResult's
+// coarse_top1 and matching_count). It does not depend on the depth-range
+// hint, so it is measured once per validation, not once per widening.
+std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes) {
+  const bool was_training = net->is_training();
+  net->eval();
+  torch::NoGradGuard no_grad;
+  double hits = 0, counted = 0;
+  for (const auto& scene : scenes) {
+    const auto batch = MakeBatch({scene}, 1.0);
+    const model::StageMatching matching = net->CoarseMatching(batch.input);
+    const auto truth = model::ComputeGroundTruthMatches(
+        batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, matching.stride,
+        matching.logits.size(2), matching.logits.size(3));
+    const auto result = model::MatchingLoss(matching, truth);
+    hits += result.top1;
+    counted += result.count;
+  }
+  net->train(was_training);
+  return {counted > 0 ? hits / counted : 0.0, counted};
 }
 
-WideningResult Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
-                        const TrainOptions& options, double widening) {
+// Depth metrics on the validation scenes with the hint widened by
+// `widening` (0: no hint), with the network's iterations as they are.
+DepthMetrics ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                           const TrainOptions& options, double widening) {
   if (widening == 0 && net->config().NeedsDepthRange()) {
     throw std::invalid_argument("weights of config '" + net->config().name +
                                 "' need a depth-range hint: no 'none' row for them");
@@ -451,30 +465,33 @@ WideningResult Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& 
   net->eval();
   torch::NoGradGuard no_grad;
   DepthMetricSums sums;
-  double hits = 0, counted = 0;
-  // Validation runs the iterations the weights are saved with.
-  const ModelConfig saved = ModelConfigByName(options.config);
-  const int64_t train_coarse = net->config().coarse_iterations;
-  const bool evaluating_file = options.checkpoint_dir.empty();
-  if (!evaluating_file) net->set_iterations(saved.coarse_iterations, saved.fine_iterations);
   for (size_t i = 0; i < scenes.size(); ++i) {
     const auto batch = MakeBatch({scenes[i]}, widening);
     // Same initialisation for a scene at every evaluation: the numbers differ
     // between evaluations only because the weights do.
     const auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
     sums += SumDepthMetrics(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
-    const auto [h, c] = CoarseMatchingHits(net, batch);
-    hits += h;
-    counted += c;
   }
   net->train(was_training);
-  if (!evaluating_file) net->set_iterations(train_coarse, saved.fine_iterations);
-  WideningResult result;
-  result.widening = widening;
-  result.metrics = Finalize(sums);
-  result.coarse_top1 = counted > 0 ? hits / counted : 0.0;
-  result.matching_count = counted;
-  return result;
+  return Finalize(sums);
+}
+
+// One table row per widening; the coarse accuracy measured once for all.
+std::vector<WideningResult> Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                                     const TrainOptions& options, const std::vector<double>& widenings) {
+  std::vector<WideningResult> results;
+  for (double x : widenings) {
+    WideningResult row;
+    row.widening = x;
+    row.metrics = ValidateDepth(net, scenes, options, x);
+    results.push_back(row);
+  }
+  const auto [top1, counted] = CoarseMatchingAccuracy(net, scenes);
+  for (auto& row : results) {
+    row.coarse_top1 = top1;
+    row.matching_count = counted;
+  }
+  return results;
 }
 
 }  // namespace
@@ -635,7 +652,12 @@ void Train(const TrainOptions& options, std::ostream& console) {
   const double cpu_start = CpuSeconds();
   auto validate = [&](int64_t step) {
     if (validation_scenes.empty()) return;
-    const WideningResult result = Validate(net, validation_scenes, options, 1.0);
+    // Validation runs the iterations the weights are saved with.
+    net->set_iterations(config.coarse_iterations, config.fine_iterations);
+    const WideningResult result = Validate(net, validation_scenes, options, {1.0}).front();
+    if (options.train_coarse_iterations > 0) {
+      net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
+    }
     char cpu[64];
     std::snprintf(cpu, sizeof cpu, "  cpu %.0f s", CpuSeconds() - cpu_start);
     log.Line("validate step " + std::to_string(step) + cpu + "  x=1  " + FormatMetrics(result.metrics) +
@@ -764,9 +786,7 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
   model::LoadModuleWeights(*net, weights_path);
   net->to(device);
   const auto scenes = ValidationScenes(options, device);
-  std::vector<WideningResult> results;
-  for (double x : widenings) results.push_back(Validate(net, scenes, options, x));
-  return results;
+  return Validate(net, scenes, options, widenings);
 }
 
 }  // namespace dispmvs::train
