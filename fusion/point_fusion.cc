@@ -32,6 +32,11 @@ void ValidateView(const std::vector<FusionView>& views, std::size_t index) {
                                   std::to_string(view.geometry.depth.height()));
     }
   }
+  if (view.min_consistent_views < -1 || view.min_consistent_views > kMaxSourceViews) {
+    throw std::invalid_argument(what + ": min_consistent_views must be in [-1, " +
+                                std::to_string(kMaxSourceViews) + "], got " +
+                                std::to_string(view.min_consistent_views));
+  }
   if (view.source_views.size() > static_cast<std::size_t>(kMaxSourceViews)) {
     throw std::invalid_argument(what + ": " + std::to_string(view.source_views.size()) +
                                 " source views, at most " + std::to_string(kMaxSourceViews));
@@ -151,6 +156,9 @@ std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
   std::array<bool, kMaxSourceViews> agrees{};
   for (std::size_t v = 0; v < views.size(); ++v) {
     const FusionView& reference = views[v];
+    const int min_consistent = reference.min_consistent_views >= 0
+                                   ? reference.min_consistent_views
+                                   : options.min_consistent_views;
     pairs.clear();
     for (int source : reference.source_views) {
       pairs.emplace_back(reference.geometry, views[source].geometry, options);
@@ -171,7 +179,7 @@ std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
           agrees[s] = pairs[s].Check(row, col, depth[index], &matches[s]);
           count += agrees[s] ? 1 : 0;
         }
-        if (count < options.min_consistent_views) continue;
+        if (count < min_consistent) continue;
 
         Accumulator sum;
         sum.Add(reference, frames[v], row, col, depth[index]);

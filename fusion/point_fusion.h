@@ -32,6 +32,11 @@ struct FusionView {
   // Indices into the same vector of FusionView, at most kMaxSourceViews,
   // without duplicates and without the view itself.
   std::vector<int> source_views;
+  // Agreeing sources this view needs as a reference, in [0, kMaxSourceViews];
+  // -1 = options.min_consistent_views. A view with fewer sources than the
+  // options ask (one map in a stereo pair) can be given what it has, so that
+  // it is not silently empty.
+  int min_consistent_views = -1;
 };
 
 // What FusePoints did, per view (same order as the views).
@@ -45,8 +50,9 @@ struct FusionStats {
 
 // Visits the views in order and, within a view, the pixels row by row. A
 // reference pixel with a usable depth (geometric_filter.h) that no earlier
-// reference consumed, and that at least options.min_consistent_views of its
-// source views agree with (the test of FilterDepthMap), becomes one point:
+// reference consumed, and that at least min_consistent_views of its source
+// views agree with (the view's own if set, else the options'; the test of
+// FilterDepthMap), becomes one point:
 //   xyz        mean of the reference point and the agreeing source points,
 //              each source point being the source's own depth at the rounded
 //              projection, back-projected;
@@ -60,7 +66,7 @@ struct FusionStats {
 // Throws std::invalid_argument for invalid options or views (bad geometry,
 // maps of the wrong size or channel count, an image of another type or size,
 // source indices out of range, repeated, pointing at the view itself or more
-// than kMaxSourceViews).
+// than kMaxSourceViews, a min_consistent_views outside [-1, kMaxSourceViews]).
 std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
                                    const GeometricFilterOptions& options,
                                    FusionStats* stats = nullptr);

@@ -257,6 +257,29 @@ TEST(PointFusionTest, TooFewAgreeingSourcesGiveNoPoints) {
   EXPECT_TRUE(FusePoints({}, options).empty());
 }
 
+// A view's own requirement replaces the options' for that reference only:
+// the stereo-pair case, where each view has one source and the default asks
+// for two.
+TEST(PointFusionTest, PerViewMinimumOverridesTheOptions) {
+  std::vector<FusionView> views = IdenticalViews(2);
+  const std::size_t num_pixels = views[0].geometry.depth.size();
+  const GeometricFilterOptions options;  // 2 needed
+  views[1].min_consistent_views = 1;
+  FusionStats stats;
+  EXPECT_EQ(FusePoints(views, options, &stats).size(), num_pixels);
+  EXPECT_EQ(stats.points_per_view, (std::vector<std::size_t>{0, num_pixels}));
+  views[0].min_consistent_views = 1;
+  EXPECT_EQ(FusePoints(views, options, &stats).size(), num_pixels);
+  EXPECT_EQ(stats.points_per_view, (std::vector<std::size_t>{num_pixels, 0}));
+  // And upwards: 0 views needed by default, 2 (more than it has) for view 0.
+  GeometricFilterOptions keep_all;
+  keep_all.min_consistent_views = 0;
+  views[0].min_consistent_views = 2;
+  views[1].min_consistent_views = -1;
+  EXPECT_EQ(FusePoints(views, keep_all, &stats).size(), num_pixels);
+  EXPECT_EQ(stats.points_per_view, (std::vector<std::size_t>{0, num_pixels}));
+}
+
 TEST(PointFusionTest, RejectsBadViews) {
   const GeometricFilterOptions options;
   std::vector<FusionView> views = IdenticalViews(3);
@@ -289,6 +312,11 @@ TEST(PointFusionTest, RejectsBadViews) {
   GeometricFilterOptions bad_options;
   bad_options.min_consistent_views = -1;
   EXPECT_THROW(FusePoints(views, bad_options), std::invalid_argument);
+  for (int bad : {-2, kMaxSourceViews + 1}) {
+    views[2].min_consistent_views = bad;
+    EXPECT_THROW(FusePoints(views, options), std::invalid_argument);
+  }
+  views[2].min_consistent_views = -1;
   EXPECT_NO_THROW(FusePoints(views, options));
 }
 

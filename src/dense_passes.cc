@@ -274,8 +274,13 @@ PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
       }
       std::vector<const fusion::DepthView*> source_pointers;
       for (const auto& source : sources) source_pointers.push_back(&source);
+      fusion::GeometricFilterOptions reference_options = options;
+      const auto lowered = plan.min_consistent_views.find(reference);
+      if (lowered != plan.min_consistent_views.end()) {
+        reference_options.min_consistent_views = lowered->second;
+      }
       const fusion::GeometricFilterResult result =
-          fusion::FilterDepthMap(ref, source_pointers, options);
+          fusion::FilterDepthMap(ref, source_pointers, reference_options);
       DenseArray normal = ReadNormalsMatching(input.normal, ref.depth);
       DenseArray confidence =
           ref.confidence.empty() ? DenseArray(ref.depth.width(), ref.depth.height(), 1, 1.0f)
@@ -342,6 +347,10 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
                                                      view.geometry.depth.height()))
                        .image;
       view.vis_index = dense_index.at(image_id);
+      const auto lowered = plan.min_consistent_views.find(image_id);
+      if (lowered != plan.min_consistent_views.end()) {
+        view.min_consistent_views = lowered->second;
+      }
       view_of[image_id] = static_cast<int>(views.size());
       views.push_back(std::move(view));
     } catch (const std::exception& error) {

@@ -54,7 +54,9 @@ PassSummary RunPhotometricPass(const colmap_io::Workspace& workspace, const Dens
 
 // Filters the photometric maps of every problem of the plan against the
 // photometric maps of its sources (those that exist) and writes the
-// geometric maps (depth, normal, confidence; 0 where inconsistent).
+// geometric maps (depth, normal, confidence; 0 where inconsistent). A
+// reference in plan.min_consistent_views needs that many agreeing sources
+// instead of options.min_consistent_views (RunFusion alike).
 // Always recomputed: it is cheap and depends on the neighbours' maps.
 PassSummary RunGeometricPass(const colmap_io::Workspace& workspace, const DensePlan& plan,
                              const fusion::GeometricFilterOptions& options, std::ostream& log);
@@ -67,7 +69,8 @@ struct FusionSummary {
 
 // Fuses the photometric maps of the images listed in stereo/fusion.cfg (or of
 // every problem's reference, without it) that have maps, with the same
-// consistency rule, into `ply_path` and `ply_path`.vis.
+// consistency rule (plan.min_consistent_views included), into `ply_path` and
+// `ply_path`.vis.
 FusionSummary RunFusion(const colmap_io::Workspace& workspace, const DensePlan& plan,
                         const fusion::GeometricFilterOptions& options,
                         const std::filesystem::path& ply_path, std::ostream& log);

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <set>
 #include <stdexcept>
 
@@ -130,6 +131,31 @@ std::string NameList(const DensePlan& plan, const std::vector<image_t>& ids) {
   }
   if (ids.size() > kShown) text += " and " + std::to_string(ids.size() - kShown) + " more";
   return text;
+}
+
+// The references the photometric pass computes a map for: those with at
+// least one source whose image file exists.
+std::set<image_t> ReferencesWithMaps(const DensePlan& plan) {
+  const std::set<image_t> missing(plan.missing_images.begin(), plan.missing_images.end());
+  std::set<image_t> ids;
+  for (const StereoProblem& problem : plan.problems) {
+    if (!problem.source_image_ids.empty() && missing.count(problem.reference_image_id) == 0) {
+      ids.insert(problem.reference_image_id);
+    }
+  }
+  return ids;
+}
+
+// Distinct sources of `problem` in `with_maps`: a source listed twice is
+// still one map to agree with.
+int CountSourcesWithMaps(const StereoProblem& problem, const std::set<image_t>& with_maps) {
+  const std::set<image_t> sources(problem.source_image_ids.begin(),
+                                  problem.source_image_ids.end());
+  int count = 0;
+  for (image_t source : sources) {
+    if (source != problem.reference_image_id && with_maps.count(source) > 0) ++count;
+  }
+  return count;
 }
 
 }  // namespace
@@ -357,6 +383,79 @@ std::vector<image_t> ReferencesWithoutHint(const DensePlan& plan) {
     }
   }
   return ids;
+}
+
+int NumSourcesWithMaps(const DensePlan& plan, const StereoProblem& problem) {
+  return CountSourcesWithMaps(problem, ReferencesWithMaps(plan));
+}
+
+std::string PlanMinConsistentViews(int min_consistent_views, bool user_set, DensePlan* plan) {
+  plan->min_consistent_views.clear();
+  const std::set<image_t> with_maps = ReferencesWithMaps(*plan);
+  // The references short of sources, in plan order, with what they have.
+  std::vector<image_t> short_ids;
+  std::map<image_t, int> available;
+  int most = 0;
+  std::set<image_t> seen;
+  for (const StereoProblem& problem : plan->problems) {
+    const image_t id = problem.reference_image_id;
+    if (with_maps.count(id) == 0 || !seen.insert(id).second) continue;
+    const int count = CountSourcesWithMaps(problem, with_maps);
+    most = std::max(most, count);
+    if (count < min_consistent_views) {
+      short_ids.push_back(id);
+      available[id] = count;
+    }
+  }
+  if (short_ids.empty()) return "";
+  const std::string required = std::to_string(min_consistent_views);
+  const std::string affected = std::to_string(short_ids.size()) + " of " +
+                               std::to_string(with_maps.size()) + " reference image(s)";
+  // Only 0 keeps anything then, and that is no consistency check: not a
+  // value to choose for the user.
+  if (most == 0) {
+    throw std::invalid_argument(
+        "no reference image has a source view with a depth map of its own (a source gets one "
+        "only as a reference image with sources of its own in patch-match.cfg), so the "
+        "geometric filter and fusion would keep no pixel at --min_num_consistent " +
+        required +
+        "; list the sources as reference images too, pass --min_num_consistent 0 to fuse the "
+        "depths unchecked, or use --mode photometric for the depth maps alone");
+  }
+  if (user_set && short_ids.size() == with_maps.size()) {
+    throw std::invalid_argument(
+        "--min_num_consistent " + required +
+        " cannot be met: no reference image has that many source views with depth maps (at "
+        "most " + std::to_string(most) + (most == 1 ? ", as in a stereo pair" : "") +
+        "), so the geometric filter and fusion would keep no pixel; pass --min_num_consistent " +
+        std::to_string(most) + " or less, or leave it out: the default adapts to the sources "
+        "available");
+  }
+  if (user_set) {
+    return "--min_num_consistent " + required + ": " + affected +
+           " have fewer source views with depth maps (" + NameList(*plan, short_ids) +
+           ") and will keep no pixel; a lower value keeps them";
+  }
+  int lowest = min_consistent_views, highest = 0, without_any = 0;
+  for (image_t id : short_ids) {
+    // At least 1: agreement with nothing is no check at all.
+    const int used = std::max(1, available[id]);
+    plan->min_consistent_views[id] = used;
+    lowest = std::min(lowest, used);
+    highest = std::max(highest, used);
+    if (available[id] == 0) ++without_any;
+  }
+  std::string warning = "--min_num_consistent is " + required + " by default, but " + affected +
+                        " have fewer source views with depth maps (" +
+                        NameList(*plan, short_ids) + "): using " + std::to_string(lowest);
+  if (highest != lowest) warning += " to " + std::to_string(highest) + " (what each has)";
+  warning += " for them";
+  if (without_any > 0) {
+    warning += "; " + std::to_string(without_any) +
+               " of them have no source with a depth map (their sources are not reference "
+               "images with sources) and keep no pixel";
+  }
+  return warning + "; pass --min_num_consistent to choose the value yourself";
 }
 
 void CheckHintsForWeights(const DensePlan& plan, const std::vector<image_t>& without,

@@ -74,6 +74,10 @@ struct DensePlan {
   // The depths the pose-based selection sampled when no hint said how far
   // the scene is (colmap_io::GuessSampleDepthsFromPoses); unset otherwise.
   std::optional<std::pair<double, double>> guessed_sample_depths;
+  // References whose geometric filter and fusion need fewer agreeing sources
+  // than --min_num_consistent, because fewer of their sources have depth maps
+  // (set by PlanMinConsistentViews); the others use the option.
+  std::map<colmap_io::image_t, int> min_consistent_views;
 
   // The hint for `image_id`: the user's, else the image's own, else the
   // fallback, widened by depth_range_widening; nullopt when there is none
@@ -116,6 +120,29 @@ std::string WithoutSparsePointsNote(const DensePlan& plan);
 
 // The references with at least one source and no depth-range hint.
 std::vector<colmap_io::image_t> ReferencesWithoutHint(const DensePlan& plan);
+
+// Sources of `problem` that will have a depth map to agree with: those that
+// are reference images of the plan with at least one source and an image
+// file (the photometric pass computes maps for no other image). The geometric
+// filter and fusion can count only these.
+int NumSourcesWithMaps(const DensePlan& plan, const colmap_io::StereoProblem& problem);
+
+// Checks --min_num_consistent (`min_consistent_views`, the agreeing sources
+// the geometric filter and fusion need) against NumSourcesWithMaps of every
+// reference that gets a map, before any work, so that a stereo pair (one
+// source each) does not end in an empty cloud without a word:
+//   - every reference has enough: returns "";
+//   - the value cannot be met by any reference, so the output would certainly
+//     be empty: throws std::invalid_argument naming the option and what to
+//     pass instead, when `user_set`, or when no reference has any source with
+//     a map (then no value but 0 keeps anything);
+//   - `user_set`, some references short: returns a warning (one line, no
+//     newline) naming them; the value is kept, they keep no pixel;
+//   - the default, some references short: sets plan->min_consistent_views to
+//     what each has (at least 1) for those and returns a warning naming the
+//     option, the default, the value used and how many references.
+// Call it on the whole plan (not a shard).
+std::string PlanMinConsistentViews(int min_consistent_views, bool user_set, DensePlan* plan);
 
 // Throws std::invalid_argument naming the images, telling the user to pass
 // --depth_min and --depth_max or to use model v2 weights, when

@@ -97,6 +97,10 @@ struct Options {
   std::string export_path;
   std::string image_list_path;
   std::string shard;  // "K/N"
+  // Whether --min_num_consistent was given: the default adapts to references
+  // with fewer sources, a value the user chose does not
+  // (dense::PlanMinConsistentViews).
+  bool min_num_consistent_given = false;
 
   void Check() const;
 };
@@ -229,7 +233,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Largest relative depth difference between a pixel and its reprojection.")
       ("min_num_consistent", po::value<int>(&o.filter.min_consistent_views)
            ->default_value(o.filter.min_consistent_views),
-       "Source views that must agree for a pixel to be kept.")
+       "Source views that must agree for a pixel to be kept (geometric filter and fusion). "
+       "Left at the default, a reference with fewer sources that have depth maps (a stereo "
+       "pair: 1 each) needs what it has, at least 1, with a warning; a value given here that "
+       "no reference can meet stops the run before any work.")
       ("min_confidence", po::value<double>(&o.filter.min_confidence)->default_value(0),
        "Drop pixels whose network confidence (in [0, 1]) is lower.")
       ("output_path", po::value<std::string>(&o.output_path),
@@ -246,6 +253,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
     return std::nullopt;
   }
   po::notify(values);
+  o.min_num_consistent_given = !values["min_num_consistent"].defaulted();
   if (values.count("workspace_path") == 0) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
   }
@@ -274,6 +282,26 @@ void PrintPassSummary(const char* pass, const dense::PassSummary& summary, std::
   std::snprintf(seconds, sizeof seconds, ", %.1f s\n", summary.seconds);
   out << seconds;
   for (const std::string& failure : summary.failures) out << "  failed: " << failure << '\n';
+}
+
+// Why fusion may have produced nothing, from what the run knows.
+void PrintEmptyCloudWarning(const Options& options, const dense::DensePlan& plan,
+                            const dense::FusionSummary& fusion, const fs::path& ply) {
+  std::cout << "warning: " << ply.string() << " has 0 points: ";
+  if (fusion.num_images == 0) {
+    std::cout << "no image has a photometric depth map to fuse (see the photometric lines above)\n";
+    return;
+  }
+  std::cout << "no pixel of the " << fusion.num_images
+            << " image(s) with depth maps agreed with enough of its sources (--min_num_consistent "
+            << options.filter.min_consistent_views;
+  if (!plan.min_consistent_views.empty()) {
+    std::cout << ", lowered for " << plan.min_consistent_views.size()
+              << " reference image(s) as warned above";
+  }
+  std::cout << "; agreeing = within --max_reproj_error and --max_depth_error";
+  if (options.filter.min_confidence > 0) std::cout << ", at --min_confidence or more";
+  std::cout << "); the geometric lines above show the share each image kept\n";
 }
 
 int Run(const Options& options) {
@@ -305,6 +333,14 @@ int Run(const Options& options) {
     dense::CheckHintsForWeights(plan, dense::ReferencesWithoutHint(plan),
                                 weights->needs_depth_range);
   }
+  // Likewise a --min_num_consistent that the sources cannot meet (a stereo
+  // pair has one source map per view): said now, not as an empty fused.ply
+  // after the network has run.
+  std::string consistency_warning;
+  if (options.mode == "full" || options.mode == "fuse") {
+    consistency_warning = dense::PlanMinConsistentViews(
+        options.filter.min_consistent_views, options.min_num_consistent_given, &plan);
+  }
   std::cout << "plan: " << plan.problems.size() << " reference image(s) from "
             << plan.problems_source << '\n';
   const std::string note = dense::WithoutSparsePointsNote(plan);
@@ -312,6 +348,7 @@ int Run(const Options& options) {
   for (auto image_id : plan.missing_images) {
     std::cout << "warning: image file missing, not used: " << plan.ImageOf(image_id).name << '\n';
   }
+  if (!consistency_warning.empty()) std::cout << "warning: " << consistency_warning << '\n';
   bool failed = !plan.missing_images.empty() && options.mode != "fuse";
   std::vector<std::pair<const char*, dense::PassSummary>> summaries;
   if (options.mode == "full" || options.mode == "photometric") {
@@ -319,11 +356,11 @@ int Run(const Options& options) {
                            dense::RunPhotometricPass(workspace, plan, options.photometric, std::cout));
   }
   std::optional<dense::FusionSummary> fusion_summary;
+  const fs::path ply = options.output_path.empty() ? workspace.root() / "fused.ply"
+                                                   : fs::path(options.output_path);
   if (options.mode == "full" || options.mode == "fuse") {
     summaries.emplace_back("geometric",
                            dense::RunGeometricPass(workspace, plan, options.filter, std::cout));
-    const fs::path ply = options.output_path.empty() ? workspace.root() / "fused.ply"
-                                                     : fs::path(options.output_path);
     fusion_summary = dense::RunFusion(workspace, plan, options.filter, ply, std::cout);
   }
   for (const auto& [pass, summary] : summaries) {
@@ -333,6 +370,11 @@ int Run(const Options& options) {
   if (fusion_summary) {
     std::cout << "summary: fusion: " << fusion_summary->num_points << " points from "
               << fusion_summary->num_images << " image(s)\n";
+    // Not a failure (the exit status says whether views failed), but an empty
+    // cloud is never what the user wanted: say why it may be.
+    if (fusion_summary->num_points == 0) {
+      PrintEmptyCloudWarning(options, plan, *fusion_summary, ply);
+    }
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

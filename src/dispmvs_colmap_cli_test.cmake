@@ -25,6 +25,11 @@
 # at 2 to 100 times the typical baseline 1), nearest cameras first.
 # "example_no_points" runs the program on the embedded example with its
 # sparse points dropped (-DMAKE_EXAMPLE, -DDROP_POINTS).
+# "stereo_pair" and "stereo_pair_explicit" keep two neighbouring views of the
+# embedded example (patch-match.cfg: view_02.png <-> view_03.png), so each
+# reference has one source map and --min_num_consistent's default (2) cannot
+# be met: the default falls back to 1 with a warning, an explicit 2 is
+# refused before any work.
 
 cmake_minimum_required(VERSION 3.18)
 
@@ -83,6 +88,31 @@ function(expect_contains text fragment)
   endif()
 endfunction()
 
+# The embedded example reduced to the stereo pair view_02.png <-> view_03.png.
+function(make_stereo_pair root)
+  if(NOT DEFINED MAKE_EXAMPLE)
+    message(FATAL_ERROR "dispmvs_colmap_cli_test: -DMAKE_EXAMPLE=... is required for ${CASE}")
+  endif()
+  file(REMOVE_RECURSE "${root}")
+  execute_process(COMMAND "${MAKE_EXAMPLE}" --output_path "${root}" --seed 1
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  expect_rc(0)
+  file(WRITE "${root}/stereo/patch-match.cfg"
+    "view_02.png\nview_03.png\nview_03.png\nview_02.png\n")
+endfunction()
+
+# The vertex count of a binary PLY (from its text header); sets `vertices`.
+function(read_ply_vertex_count path)
+  if(NOT EXISTS "${path}")
+    message(FATAL_ERROR "${path} was not written\nstdout:\n${out}\nstderr:\n${err}")
+  endif()
+  file(STRINGS "${path}" header LIMIT_INPUT 1024 REGEX "^element vertex [0-9]+$")
+  if(NOT header MATCHES "^element vertex ([0-9]+)$")
+    message(FATAL_ERROR "${path} has no vertex count in its header")
+  endif()
+  set(vertices "${CMAKE_MATCH_1}" PARENT_SCOPE)
+endfunction()
+
 # A failure must be one "error: ..." line on stderr and nothing on stdout.
 function(expect_error_line fragment)
   expect_rc(1)
@@ -107,6 +137,10 @@ if(CASE STREQUAL "help")
   expect_contains("${out}" "--shard")
   expect_contains("${out}" "no sparse points at all")
   expect_contains("${out}" "from the camera poses")
+  # Boost wraps option descriptions: compare them as one line.
+  string(REGEX REPLACE " *\n *" " " flat "${out}")
+  expect_contains("${flat}" "(a stereo pair: 1 each) needs what it has, at least 1, with a warning")
+  expect_contains("${flat}" "no reference can meet stops the run before any work")
 elseif(CASE STREQUAL "missing_workspace_option")
   run_program()
   expect_error_line("--workspace_path is required")
@@ -359,6 +393,72 @@ elseif(CASE STREQUAL "example_no_points")
   if(NOT EXISTS "${ws}/stereo/depth_maps/${reference}.dispmvs.photometric.bin")
     message(FATAL_ERROR "no depth map for ${reference}:\n${out}")
   endif()
+elseif(CASE STREQUAL "stereo_pair")
+  # One source map per reference, the default asks for 2: the run says so
+  # before the network starts, uses 1 for both references and fuses points.
+  make_stereo_pair("${ws}")
+  run_program(--workspace_path "${ws}" --max_image_size 160 --threads 1)
+  expect_rc(0)
+  set(warning "warning: --min_num_consistent is 2 by default, but 2 of 2 reference image(s) have fewer source views with depth maps (view_02.png, view_03.png): using 1 for them; pass --min_num_consistent to choose the value yourself\n")
+  expect_contains("${out}" "${warning}")
+  string(FIND "${out}" "${warning}" warning_at)
+  string(FIND "${out}" "photometric: network" network_at)
+  if(network_at EQUAL -1 OR NOT warning_at LESS network_at)
+    message(FATAL_ERROR "the warning does not come before the network runs:\n${out}")
+  endif()
+  expect_contains("${out}" "photometric: 2 done")
+  expect_contains("${out}" "geometric: 2 done")
+  string(FIND "${out}" "has 0 points" position)
+  if(NOT position EQUAL -1)
+    message(FATAL_ERROR "empty cloud:\n${out}")
+  endif()
+  read_ply_vertex_count("${ws}/fused.ply")
+  if(NOT vertices GREATER 0)
+    message(FATAL_ERROR "fused.ply has ${vertices} points\n${out}")
+  endif()
+  file(READ "${ws}/fused.ply" fallback_ply HEX)
+  file(SHA256 "${ws}/stereo/depth_maps/view_02.png.dispmvs.geometric.bin" fallback_map)
+
+  # The fallback is exactly an explicit 1, which needs no word.
+  run_program(--mode fuse --workspace_path "${ws}" --min_num_consistent 1)
+  expect_rc(0)
+  string(FIND "${out}" "warning:" position)
+  if(NOT position EQUAL -1)
+    message(FATAL_ERROR "warning with an explicit value the pair meets:\n${out}")
+  endif()
+  file(READ "${ws}/fused.ply" explicit_ply HEX)
+  file(SHA256 "${ws}/stereo/depth_maps/view_02.png.dispmvs.geometric.bin" explicit_map)
+  if(NOT fallback_ply STREQUAL explicit_ply OR NOT fallback_map STREQUAL explicit_map)
+    message(FATAL_ERROR "the fallback differs from --min_num_consistent 1")
+  endif()
+
+  # An empty cloud is not a failure, but it is said, with the options that
+  # decide it.
+  run_program(--mode fuse --workspace_path "${ws}" --max_depth_error 1e-12)
+  expect_rc(0)
+  expect_contains("${out}" "summary: fusion: 0 points from 2 image(s)\n")
+  expect_contains("${out}" "warning: ${ws}/fused.ply has 0 points: no pixel of the 2 image(s) with depth maps agreed with enough of its sources (--min_num_consistent 2, lowered for 2 reference image(s) as warned above; agreeing = within --max_reproj_error and --max_depth_error); the geometric lines above show the share each image kept\n")
+elseif(CASE STREQUAL "stereo_pair_explicit")
+  # An explicit value no reference can meet: refused before any work, in
+  # both modes that filter, naming the option and what to pass.
+  make_stereo_pair("${ws}")
+  foreach(mode full fuse)
+    run_program(--mode ${mode} --workspace_path "${ws}" --min_num_consistent 2 --threads 1)
+    expect_error_line("--min_num_consistent 2 cannot be met: no reference image has that many source views with depth maps (at most 1, as in a stereo pair), so the geometric filter and fusion would keep no pixel; pass --min_num_consistent 1 or less, or leave it out")
+  endforeach()
+  file(GLOB written "${ws}/stereo/*/*.dispmvs.*" "${ws}/fused.ply")
+  if(written)
+    message(FATAL_ERROR "files written although the run was refused: ${written}")
+  endif()
+  # Modes without the filter are not refused (the plan, here).
+  run_program(--mode plan --workspace_path "${ws}" --min_num_consistent 2)
+  expect_rc(0)
+  # Sources that are no references have no maps: with view_03.png as the
+  # only reference, no value but 0 keeps anything, even by default.
+  file(WRITE "${ws}/stereo/patch-match.cfg" "view_03.png\nview_02.png\n")
+  run_program(--workspace_path "${ws}" --threads 1)
+  expect_error_line("no reference image has a source view with a depth map of its own")
+  expect_contains("${err}" "--min_num_consistent 0")
 else()
   message(FATAL_ERROR "unknown CASE ${CASE}")
 endif()
