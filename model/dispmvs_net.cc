@@ -143,7 +143,8 @@ void CheckInput(const DispMvsInput& in, bool needs_depth_range) {
     if (!t.defined() || t.sizes() != torch::IntArrayRef(expected)) {
       std::string e = "[";
       for (size_t i = 0; i < expected.size(); ++i) {
-        e += (i ? "," : "") + std::to_string(expected[i]);
+        if (i) e += ",";
+        e += std::to_string(expected[i]);
       }
       fail(std::string(name) + " must be " + e + "], got " + ShapeOf(t));
     }

@@ -1,14 +1,20 @@
 #include "model/dispmvs_net.h"
 
-#include <stdexcept>
 #include <chrono>
+#include <cmath>
+#include <stdexcept>
+#include <filesystem>
+#include <string>
 #include <thread>
 #include <tuple>
+#include <unistd.h>
 
 #include <ATen/CPUGeneratorImpl.h>
 #include <gtest/gtest.h>
+#include <torch/cuda.h>
 
 #include "model/loss.h"
+#include "model/safetensors.h"
 
 namespace dispmvs::model {
 namespace {
@@ -303,6 +309,121 @@ TEST(DispMvsNetStageTimerTest, TimesEveryStageWithoutChangingTheOutput) {
   EXPECT_EQ(timer.total_seconds(), 0.0);
   EXPECT_EQ(timer.count(NetStage::kGeometry), 0);
 }
+
+// The training step, the inference pass, the coarse matching and the weights
+// files on a device (CUDA where there is one; the CPU instance checks this
+// harness): the same weights, input and seeded CPU generator give the CPU's
+// results, and everything the network returns lives on the device. Loose
+// agreement only: cuDNN may use TF32, and arg-max near-ties may break the
+// other way.
+class DispMvsNetDeviceTest : public ::testing::TestWithParam<std::tuple<std::string, bool>> {};
+
+TEST_P(DispMvsNetDeviceTest, TrainingStepInferenceAndWeightsMatchTheCpu) {
+  const auto [device_name, v2] = GetParam();
+  const torch::Device device(device_name);
+  if (device.is_cuda() && !torch::cuda::is_available()) GTEST_SKIP() << "no CUDA device";
+  const ModelConfig config = v2 ? FastV2Config() : FastConfig();
+  const int64_t h = 48, w = 64, sources = 2;
+  torch::manual_seed(3);
+  DispMvsNet cpu_net(config);
+  torch::manual_seed(3);
+  DispMvsNet net(config);
+  net->to(device);
+  const DispMvsInput cpu_in = MakeInput(1, sources, h, w);
+  DispMvsInput in = cpu_in;
+  for (torch::Tensor* t : {&in.images, &in.intrinsics, &in.extrinsics, &in.depth_min, &in.depth_max}) {
+    *t = t->to(device);
+  }
+  // Depth only in the reference (a plane), so no occlusion check.
+  torch::Tensor cpu_depths = torch::zeros({1, sources + 1, 1, h, w});
+  cpu_depths.select(1, 0).fill_(3.5f);
+  const auto on_device = [&](const torch::Tensor& t) { return t.defined() && t.device() == device; };
+
+  struct Step {
+    double loss = 0, grad_norm = 0, counted = 0;
+  };
+  const auto train_step = [&](DispMvsNet& n, const DispMvsInput& input) {
+    const torch::Tensor depths = cpu_depths.to(input.images.device());
+    n->train();
+    n->zero_grad();
+    const DispMvsOutput out = n->forward(input, at::make_generator<at::CPUGeneratorImpl>(5));
+    for (const torch::Tensor& t : out.inv_depths) EXPECT_EQ(t.device(), input.images.device());
+    torch::Tensor loss = SequenceLoss(out.inv_depths, depths.select(1, 0), depths.select(1, 0) > 0,
+                                      input.depth_min, input.depth_max);
+    Step step;
+    EXPECT_EQ(out.matching.size(), v2 ? 2u : 0u);
+    for (const StageMatching& m : out.matching) {
+      const auto truth = ComputeGroundTruthMatches(depths, input.intrinsics, input.extrinsics, m.stride,
+                                                   m.logits.size(2), m.logits.size(3));
+      const MatchingLossResult r = MatchingLoss(m, truth);
+      step.counted += r.count;
+      loss = loss + r.loss;
+    }
+    loss.backward();
+    step.loss = loss.item<double>();
+    double squares = 0;
+    for (const auto& p : n->named_parameters()) {
+      EXPECT_TRUE(p.value().grad().defined() && p.value().grad().device() == p.value().device()) << p.key();
+      if (p.value().grad().defined()) squares += p.value().grad().square().sum().item<double>();
+    }
+    step.grad_norm = std::sqrt(squares);
+    return step;
+  };
+  const Step expected = train_step(cpu_net, cpu_in);
+  const Step got = train_step(net, in);
+  for (const auto& p : net->parameters()) EXPECT_TRUE(on_device(p));
+  EXPECT_TRUE(std::isfinite(got.loss) && std::isfinite(got.grad_norm));
+  EXPECT_NEAR(got.loss, expected.loss, 0.1 * std::abs(expected.loss));
+  EXPECT_NEAR(got.grad_norm, expected.grad_norm, 0.2 * expected.grad_norm);
+  EXPECT_NEAR(got.counted, expected.counted, 0.02 * expected.counted);
+
+  torch::NoGradGuard no_grad;
+  cpu_net->eval();
+  net->eval();
+  const DispMvsOutput cpu_out = cpu_net->forward(cpu_in, at::make_generator<at::CPUGeneratorImpl>(6));
+  const DispMvsOutput out = net->forward(in, at::make_generator<at::CPUGeneratorImpl>(6));
+  for (const torch::Tensor& t : {out.depth, out.valid, out.confidence, out.inv_depths.back()}) {
+    EXPECT_TRUE(on_device(t));
+  }
+  // Depths agree (within 1 %) on most pixels that either pass predicts.
+  const torch::Tensor depth = out.depth.cpu(), valid = out.valid.cpu();
+  const torch::Tensor either = valid | cpu_out.valid;
+  const torch::Tensor agree = valid & cpu_out.valid & ((depth - cpu_out.depth).abs() <= 0.01 * cpu_out.depth);
+  ASSERT_GT(either.sum().item<int64_t>(), 0);
+  EXPECT_GE(agree.sum().item<double>(), 0.9 * either.sum().item<double>());
+
+  const StageMatching matching = net->CoarseMatching(in);
+  for (const torch::Tensor& t : {matching.logits, matching.sample_eflow, matching.inside, matching.base_xy}) {
+    EXPECT_TRUE(on_device(t));
+  }
+  const StageMatching cpu_matching = cpu_net->CoarseMatching(cpu_in);
+  EXPECT_EQ(matching.logits.sizes(), cpu_matching.logits.sizes());
+  const torch::Tensor same_peak = matching.logits.argmax(1).cpu() == cpu_matching.logits.argmax(1);
+  EXPECT_GE(same_peak.to(torch::kDouble).mean().item<double>(), 0.9);
+
+  // Weights written from the device read back on the CPU and on the device.
+  const std::filesystem::path path = std::filesystem::temp_directory_path() /
+                                     ("dispmvs_device_test_" + std::to_string(::getpid()) + ".safetensors");
+  SaveModuleWeights(*net, config, path.string());
+  DispMvsNet reread(config);
+  LoadModuleWeights(*reread, path.string());
+  const auto stored = net->named_parameters();
+  for (const auto& p : reread->named_parameters()) {
+    EXPECT_TRUE(torch::equal(p.value(), stored[p.key()].cpu())) << p.key();
+  }
+  reread->to(device);
+  cpu_net->to(device);
+  LoadModuleWeights(*cpu_net, path.string());  // into device parameters
+  for (const auto& p : cpu_net->named_parameters()) {
+    EXPECT_TRUE(on_device(p.value()));
+    EXPECT_TRUE(torch::equal(p.value(), stored[p.key()])) << p.key();
+  }
+  std::filesystem::remove(path);
+}
+
+INSTANTIATE_TEST_SUITE_P(Devices, DispMvsNetDeviceTest,
+                         ::testing::Combine(::testing::Values(std::string("cpu"), std::string("cuda")),
+                                            ::testing::Bool()));
 
 TEST(StageTimerTest, SectionsAddUpAndNullTimerIsANoOp) {
   StageTimer timer;

@@ -184,9 +184,16 @@ EpipolarPair MakeEpipolarPair(const torch::Tensor& K_ref, const torch::Tensor& K
     }
   }
 
-  // linalg_inv_ex neither throws nor synchronises; a singular K_ref is
-  // reported in `info` and turned into degenerate (zero) coefficients below.
-  const auto [K_ref_inv, info] = torch::linalg_inv_ex(K_ref);
+  // linalg_inv_ex does not throw: a singular K_ref is reported in `info` and
+  // turned into degenerate (zero) coefficients below. It runs on the CPU
+  // whatever the device (9 numbers per camera; on the CPU nothing changes):
+  // on CUDA it would need LibTorch's CUDA linear-algebra backend (cuSOLVER /
+  // MAGMA, which some builds load lazily from libtorch_cuda_linalg.so) for
+  // nothing else in the network, and the CPU inverse keeps K^-1 identical on
+  // every device. One small copy each way per call.
+  const auto [K_ref_inv_cpu, info_cpu] = torch::linalg_inv_ex(K_ref.cpu());
+  const torch::Tensor K_ref_inv = K_ref_inv_cpu.to(K_ref.device());
+  const torch::Tensor info = info_cpu.to(K_ref.device());
   const torch::Tensor M = K_src.matmul(R).matmul(K_ref_inv).expand({batch, 3, 3});
 
   const torch::Tensor grid = PixelGrid(height, width, K_ref.options()).reshape({2, -1});

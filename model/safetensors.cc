@@ -259,7 +259,8 @@ std::string BuildHeader(const NamedTensors& cpu_tensors,
     out += json::Quote(name) + ":{\"dtype\":\"" + FindDType(tensor.scalar_type())->name +
            "\",\"shape\":[";
     for (int64_t d = 0; d < tensor.dim(); ++d) {
-      out += (d ? "," : "") + std::to_string(tensor.size(d));
+      if (d) out += ",";
+      out += std::to_string(tensor.size(d));
     }
     out += "],\"data_offsets\":[" + std::to_string(offset) + ',' + std::to_string(offset + bytes) +
            "]}";

@@ -41,6 +41,8 @@ options (default):
   --steps S                   total steps (1000)
   --lr LR                     Adam learning rate (2e-4)
   --lr_halve_every K          halve the learning rate every K steps, 0 = never (0)
+  --lr_warmup_steps K         raise the learning rate linearly over the first K steps (use it with
+                              --init_weights: the optimiser's moments start empty), 0 = off (0)
   --grad_clip C               max gradient norm, 0 = off (1)
   --train_widening_max X      widen each step's depth-range hint by x, log-uniform in [1, X],
                               so the model does not lean on a tight range; 1 = off (1)
@@ -65,6 +67,7 @@ options (default):
                               and the saved weights keep the config's (0)
   --max_cpu_minutes M         stop (checkpoint, validate, write the model) after M minutes of
                               process CPU time; 0 = no limit (0)
+  --max_minutes M             the same after M minutes of wall-clock time (0)
   --init_weights FILE         start from these weights (e.g. models/dispmvs_small.safetensors,
                               to fine-tune at a larger size) instead of a random initialisation;
                               the file must fit --config (none)
@@ -169,6 +172,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--steps") o.steps = ParseInt(flag, value);
     else if (flag == "--lr") o.lr = ParseDouble(flag, value);
     else if (flag == "--lr_halve_every") o.lr_halve_every = ParseInt(flag, value);
+    else if (flag == "--lr_warmup_steps") o.lr_warmup_steps = ParseInt(flag, value);
     else if (flag == "--grad_clip") o.grad_clip = ParseDouble(flag, value);
     else if (flag == "--train_widening_max") o.train_widening_max = ParseDouble(flag, value);
     else if (flag == "--mvsnet_root") o.mvsnet_root = value;
@@ -181,6 +185,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
     else if (flag == "--difficulty_ramp_steps") o.difficulty_ramp_steps = ParseInt(flag, value);
     else if (flag == "--max_cpu_minutes") o.max_cpu_minutes = ParseDouble(flag, value);
+    else if (flag == "--max_minutes") o.max_minutes = ParseDouble(flag, value);
     else if (flag == "--widenings") cl.widenings = ParseWidenings(flag, value);
     else if (flag == "--texture_dir") o.texture_dir = value;
     else if (flag == "--photo_probability") o.photo_probability = ParseDouble(flag, value);

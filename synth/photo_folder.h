@@ -5,9 +5,11 @@
 // bench/motorcycle_check.sh evaluates on), or a wallpaper package
 // (gnome-backgrounds: mostly .webp graphics).
 //
-// Decoding needs OpenCV, which the LibTorch-only build (a bare GPU machine)
-// lacks: there LoadPhotoFolder throws, saying so, and only procedural
-// textures are available. PhotoFolderAvailable() tells which build this is.
+// Binary PPM/PGM files are decoded by the project itself (synth/netpbm.h) in
+// every build; the other formats need OpenCV, which the LibTorch-only build
+// (a bare GPU machine) lacks: there they are skipped with a warning
+// (train/gpu_train.sh converts photos to PPM first).
+// PhotoFolderDecodesAllFormats() tells which build this is.
 
 #include <cstdint>
 #include <ostream>
@@ -23,14 +25,14 @@ struct PhotoFolderOptions {
   int min_side = 16;     // smaller ones are skipped with a warning
 };
 
-bool PhotoFolderAvailable();
+bool PhotoFolderDecodesAllFormats();
 
-// Every .png, .jpg, .jpeg, .bmp, .tif, .tiff or .webp file directly in
-// `folder` (case-insensitive extension, name order), decoded as RGB in
-// [0, 1]. Files that cannot be decoded, or are too small, are skipped with a
-// warning line on `warnings` (when not null). Throws std::invalid_argument
-// when the folder does not exist or yields no photo, and std::runtime_error
-// in a build without OpenCV.
+// Every .png, .jpg, .jpeg, .bmp, .tif, .tiff, .webp, .ppm or .pgm file
+// directly in `folder` (case-insensitive extension, name order), decoded as
+// RGB in [0, 1]. Files that cannot be decoded (in a build without OpenCV:
+// any but PPM/PGM), or are too small, are skipped with a warning line on
+// `warnings` (when not null). Throws std::invalid_argument when the folder
+// does not exist or yields no photo.
 PhotoSet LoadPhotoFolder(const std::string& folder, const PhotoFolderOptions& options = {},
                          std::ostream* warnings = nullptr);
 

@@ -1,5 +1,5 @@
-// Loading a folder of photographs for photo textures (needs OpenCV: part of
-// the full build).
+// Loading a folder of photographs for photo textures (the full build, with
+// OpenCV: every format; PPM/PGM through the project's own reader).
 
 #include "synth/photo_folder.h"
 
@@ -19,7 +19,7 @@ namespace fs = std::filesystem;
 using testing::TempDir;
 
 TEST(PhotoFolderTest, LoadsDecodableImagesInNameOrderAsRgb) {
-  ASSERT_TRUE(PhotoFolderAvailable());
+  ASSERT_TRUE(PhotoFolderDecodesAllFormats());
   TempDir tmp;
   // b_red.png: pure red (BGR 0,0,255); a_wide.jpg: 1000x300, shrunk to 512 wide.
   cv::imwrite((tmp.path() / "b_red.png").string(), cv::Mat(20, 40, CV_8UC3, cv::Scalar(0, 0, 255)));
@@ -49,6 +49,27 @@ TEST(PhotoFolderTest, LoadsDecodableImagesInNameOrderAsRgb) {
   PhotoFolderOptions one;
   one.max_photos = 1;
   EXPECT_EQ(LoadPhotoFolder(tmp.path().string(), one).size(), 1u);
+}
+
+TEST(PhotoFolderTest, PpmPhotosAreShrunkByAreaAveraging) {
+  TempDir tmp;
+  // 1000 x 300, left half RGB (200, 100, 50), right half (0, 0, 0): shrunk to
+  // 512 x 154 by area averaging, the mean keeps half the colour.
+  std::string pixels;
+  for (int y = 0; y < 300; ++y) {
+    for (int x = 0; x < 1000; ++x) pixels += x < 500 ? std::string{'\xc8', '\x64', '\x32'} : std::string(3, '\0');
+  }
+  std::ofstream(tmp.path() / "wide.PPM", std::ios::binary) << "P6\n1000 300\n255\n" << pixels;
+  std::ofstream(tmp.path() / "cut.ppm", std::ios::binary) << "P6\n1000 300\n255\n" << pixels.substr(0, 99);
+  std::ostringstream warnings;
+  const PhotoSet photos = LoadPhotoFolder(tmp.path().string(), {}, &warnings);
+  ASSERT_EQ(photos.size(), 1u);
+  EXPECT_EQ(photos[0].sizes(), torch::IntArrayRef({3, 154, 512}));
+  EXPECT_NEAR(photos[0][0].mean().item<double>(), 0.5 * 200 / 255.0, 1e-3);
+  EXPECT_NEAR(photos[0][2].mean().item<double>(), 0.5 * 50 / 255.0, 1e-3);
+  EXPECT_FLOAT_EQ(photos[0][0][77][0].item<float>(), 200 / 255.0f);
+  EXPECT_FLOAT_EQ(photos[0][1][77][511].item<float>(), 0.0f);
+  EXPECT_NE(warnings.str().find("cut.ppm: truncated"), std::string::npos) << warnings.str();
 }
 
 TEST(PhotoFolderTest, MissingOrUselessFoldersAreRefused) {

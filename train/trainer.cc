@@ -15,6 +15,7 @@
 #include <sstream>
 #include <stdexcept>
 #include <thread>
+#include <type_traits>
 
 #include "model/config.h"
 #include "model/dispmvs_net.h"
@@ -316,6 +317,7 @@ Settings RunSettings(const TrainOptions& o) {
           {"seed", std::to_string(o.seed)},
           {"lr", lr.str()},
           {"lr_halve_every", std::to_string(o.lr_halve_every)},
+          {"lr_warmup_steps", std::to_string(o.lr_warmup_steps)},
           {"grad_clip", clip.str()},
           {"train_widening_max", widening.str()},
           {"mvsnet_root", AbsolutePathSetting(o.mvsnet_root)},
@@ -347,12 +349,25 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "train_coarse_iterations") return "0";
   if (key == "difficulty_start") return std::to_string(1.0);
   if (key == "difficulty_ramp_steps") return "0";
+  if (key == "lr_warmup_steps") return "0";
   return std::nullopt;
 }
 
-// Adam keeps its per-parameter state under this key (LibTorch's convention).
-std::string AdamStateKey(const torch::Tensor& parameter) {
-  return c10::guts::to_string(parameter.unsafeGetTensorImpl());
+// Adam keeps its per-parameter state under the parameter's TensorImpl: its
+// address printed to a string in older LibTorch (Debian's 1.13; it used
+// c10::guts::to_string, since removed), the address itself (void*) in newer
+// ones (PyTorch PR #108480, 2023). The key type comes from the state map, so
+// the trainer builds against both: a GPU machine's CUDA PyTorch is newer.
+template <typename StateMap>
+typename StateMap::key_type AdamStateKey(const StateMap& /*state*/, const torch::Tensor& parameter) {
+  using Key = typename StateMap::key_type;
+  if constexpr (std::is_same_v<Key, std::string>) {
+    std::ostringstream key;  // c10::guts::to_string's format: operator<< of the pointer
+    key << static_cast<const void*>(parameter.unsafeGetTensorImpl());
+    return key.str();
+  } else {
+    return static_cast<Key>(parameter.unsafeGetTensorImpl());
+  }
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,
@@ -360,7 +375,7 @@ void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const Mo
   model::NamedTensors tensors;
   int64_t adam_step = -1;
   for (const auto& item : net->named_parameters()) {
-    auto found = optimizer.state().find(AdamStateKey(item.value()));
+    auto found = optimizer.state().find(AdamStateKey(optimizer.state(), item.value()));
     if (found == optimizer.state().end()) continue;  // never received a gradient
     auto& state = static_cast<torch::optim::AdamParamState&>(*found->second);
     if (adam_step >= 0 && state.step() != adam_step) {
@@ -369,6 +384,12 @@ void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const Mo
     adam_step = state.step();
     tensors.emplace_back("exp_avg/" + item.key(), state.exp_avg());
     tensors.emplace_back("exp_avg_sq/" + item.key(), state.exp_avg_sq());
+  }
+  if (tensors.size() != 2 * optimizer.state().size()) {
+    // Every state belongs to one of the parameters: else AdamStateKey does
+    // not match the optimizer's keys, and resuming would silently restart Adam.
+    throw std::logic_error("Adam state: " + std::to_string(optimizer.state().size()) + " states, " +
+                           std::to_string(tensors.size() / 2) + " found under the parameters' keys");
   }
   Settings metadata = settings;
   metadata["step"] = std::to_string(step);
@@ -416,7 +437,7 @@ void LoadCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, torch::o
     state->step(adam_step);
     state->exp_avg(avg->second.to(device, item.value().scalar_type()));
     state->exp_avg_sq(avg_sq->second.to(device, item.value().scalar_type()));
-    optimizer.state()[AdamStateKey(item.value())] = std::move(state);
+    optimizer.state()[AdamStateKey(optimizer.state(), item.value())] = std::move(state);
   }
 }
 
@@ -510,6 +531,7 @@ void TrainOptions::Check(bool for_training) const {
   if (steps < 0 || steps > 999'999'999) fail("steps must be in [0, 999999999], got " + std::to_string(steps));
   if (!(std::isfinite(lr) && lr > 0 && lr < 1)) fail("lr must be in (0, 1), got " + std::to_string(lr));
   if (lr_halve_every < 0) fail("lr_halve_every must be >= 0, got " + std::to_string(lr_halve_every));
+  if (lr_warmup_steps < 0) fail("lr_warmup_steps must be >= 0, got " + std::to_string(lr_warmup_steps));
   if (!(std::isfinite(grad_clip) && grad_clip >= 0)) {
     fail("grad_clip must be a finite number >= 0, got " + std::to_string(grad_clip));
   }
@@ -561,6 +583,9 @@ void TrainOptions::Check(bool for_training) const {
   if (!(std::isfinite(max_cpu_minutes) && max_cpu_minutes >= 0)) {
     fail("max_cpu_minutes must be a finite number >= 0, got " + std::to_string(max_cpu_minutes));
   }
+  if (!(std::isfinite(max_minutes) && max_minutes >= 0)) {
+    fail("max_minutes must be a finite number >= 0, got " + std::to_string(max_minutes));
+  }
   SynthConfigFor(*this);  // the generator's own limits
 }
 
@@ -571,8 +596,12 @@ double TrainingDifficultyAt(const TrainOptions& options, int64_t step) {
 }
 
 double LearningRateAt(const TrainOptions& options, int64_t step) {
-  if (options.lr_halve_every <= 0) return options.lr;
-  return options.lr * std::pow(0.5, static_cast<double>(step / options.lr_halve_every));
+  double lr = options.lr;
+  if (options.lr_halve_every > 0) lr *= std::pow(0.5, static_cast<double>(step / options.lr_halve_every));
+  if (step < options.lr_warmup_steps) {
+    lr *= static_cast<double>(step + 1) / static_cast<double>(options.lr_warmup_steps);
+  }
+  return lr;
 }
 
 uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index) {
@@ -753,8 +782,10 @@ void Train(const TrainOptions& options, std::ostream& console) {
     log.Line(line);
 
     const int64_t done = step + 1;
-    const bool out_of_time =
+    const bool out_of_cpu_time =
         options.max_cpu_minutes > 0 && CpuSeconds() - cpu_start >= 60.0 * options.max_cpu_minutes;
+    const bool out_of_wall_time = options.max_minutes > 0 && seconds_since(run_start) >= 60.0 * options.max_minutes;
+    const bool out_of_time = out_of_cpu_time || out_of_wall_time;
     if (done % options.checkpoint_every == 0 || done == options.steps || out_of_time) {
       SaveCheckpoint(dir, done, net, config, optimizer, settings);
     }
@@ -763,7 +794,8 @@ void Train(const TrainOptions& options, std::ostream& console) {
       last_validated = done;
     }
     if (out_of_time) {
-      log.Line("stopping after step " + std::to_string(done) + ": --max_cpu_minutes reached");
+      log.Line("stopping after step " + std::to_string(done) + ": " +
+               (out_of_cpu_time ? "--max_cpu_minutes" : "--max_minutes") + " reached");
       final_step = done;
       break;
     }

@@ -43,6 +43,11 @@ struct TrainOptions {
   int64_t steps = 1000;  // total, counted from step 0 (a resumed run goes on to here)
   double lr = 2e-4;
   int64_t lr_halve_every = 0;  // halve lr every K steps; 0 = constant
+  // Linear warm-up over the run's first K steps (from lr / K to lr). A run
+  // that starts from --init_weights has fresh Adam moments (checkpoints keep
+  // them, shipped weights do not); full-size first steps on those moments
+  // can undo what the weights had learned. 0 = off.
+  int64_t lr_warmup_steps = 0;
   double grad_clip = 1.0;      // max global gradient norm; 0 = no clipping
   // Depth-range augmentation: each step widens the hint of its samples to
   // (d_min / x, d_max * x) with x log-uniform in [1, train_widening_max], so
@@ -92,6 +97,9 @@ struct TrainOptions {
   // has used this much CPU time (all threads), 0 = no limit: equal-CPU-time
   // comparisons, and runs that must end before a deadline.
   double max_cpu_minutes = 0;
+  // The same in wall-clock minutes since the run started (a GPU run with a
+  // fixed device lease), 0 = no limit.
+  double max_minutes = 0;
   uint64_t seed = 0;
   std::string device = "cpu";  // "cpu", "cuda" or "cuda:<i>"
   int64_t threads = 0;         // intra-op threads; 0 = one per core

@@ -177,17 +177,20 @@ TEST(TrainerV2Test, MatchingLossWarmupSceneReuseAndCurriculumResumeBitForBit) {
   EXPECT_THROW(Train(changed, log), std::runtime_error);
 }
 
-TEST(TrainerV2Test, CpuBudgetStopsTheRunWithAModel) {
-  TempDir tmp;
-  auto options = TinyV2Options(tmp.path() / "run", 50);
-  options.max_cpu_minutes = 1e-6;
-  options.num_validation_scenes = 1;
-  std::ostringstream log;
-  Train(options, log);
-  EXPECT_NE(log.str().find("stopping after step 1: --max_cpu_minutes reached"), std::string::npos) << log.str();
-  EXPECT_NE(log.str().find("validate step 1  cpu "), std::string::npos) << log.str();
-  EXPECT_TRUE(fs::exists(tmp.path() / "run" / "model.safetensors"));
-  EXPECT_TRUE(fs::exists(tmp.path() / "run" / "checkpoint-000000001.safetensors"));
+TEST(TrainerV2Test, CpuOrWallClockBudgetStopsTheRunWithAModel) {
+  for (const std::string budget : {"--max_cpu_minutes", "--max_minutes"}) {
+    SCOPED_TRACE(budget);
+    TempDir tmp;
+    auto options = TinyV2Options(tmp.path() / "run", 50);
+    (budget == "--max_minutes" ? options.max_minutes : options.max_cpu_minutes) = 1e-6;
+    options.num_validation_scenes = 1;
+    std::ostringstream log;
+    Train(options, log);
+    EXPECT_NE(log.str().find("stopping after step 1: " + budget + " reached"), std::string::npos) << log.str();
+    EXPECT_NE(log.str().find("validate step 1  cpu "), std::string::npos) << log.str();
+    EXPECT_TRUE(fs::exists(tmp.path() / "run" / "model.safetensors"));
+    EXPECT_TRUE(fs::exists(tmp.path() / "run" / "checkpoint-000000001.safetensors"));
+  }
 }
 
 TEST(TrainerV2Test, EvaluationWithoutAHintOnlyForV2Weights) {
@@ -261,6 +264,9 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o.checkpoint_every = 0;
   ExpectRejected(o, "checkpoint_every");
   o = good;
+  o.lr_warmup_steps = -1;
+  ExpectRejected(o, "lr_warmup_steps");
+  o = good;
   o.checkpoint_dir.clear();
   ExpectRejected(o, "checkpoint_dir");
   EXPECT_NO_THROW(o.Check(/*for_training=*/false));
@@ -276,6 +282,16 @@ TEST(TrainerTest, LearningRateHalvesEveryKStepsAndSeedsAreDisjoint) {
   EXPECT_EQ(LearningRateAt(o, 25), 5e-5);
   o.lr_halve_every = 0;
   EXPECT_EQ(LearningRateAt(o, 1000), 2e-4);
+  // Warm-up: linear from lr / K at step 0 to lr at step K - 1, then constant.
+  o.lr_warmup_steps = 4;
+  EXPECT_DOUBLE_EQ(LearningRateAt(o, 0), 0.5e-4);
+  EXPECT_DOUBLE_EQ(LearningRateAt(o, 2), 1.5e-4);
+  EXPECT_DOUBLE_EQ(LearningRateAt(o, 3), 2e-4);
+  EXPECT_DOUBLE_EQ(LearningRateAt(o, 4), 2e-4);
+  o.lr_halve_every = 2;  // both: the halving applies under the warm-up
+  EXPECT_DOUBLE_EQ(LearningRateAt(o, 2), 2e-4 * 0.5 * 0.75);
+  o.lr_warmup_steps = 0;
+  o.lr_halve_every = 0;
   // Training seeds have the top bit set; validation seeds are small.
   EXPECT_GE(TrainingSampleSeed(0, 0, 0), uint64_t{1} << 63);
   EXPECT_NE(TrainingSampleSeed(0, 0, 1), TrainingSampleSeed(0, 1, 0));

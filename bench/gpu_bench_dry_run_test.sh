@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Dry run of bench/gpu_bench.sh on the CPU at a tiny size (the ctest
+# bench_gpu_script_dry_run): the script's steps run here as on a device.
+#   gpu_bench_dry_run_test.sh SCRIPT BUILD_DIR WORK_DIR
+set -euo pipefail
+script=$1 build=$2 work=$3
+rm -rf "$work" && mkdir -p "$work"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+"$script" --device cpu --sizes 64x48,96x64 --reps 1 --warmup 0 --build "$build" --out "$work/out" \
+  --work "$work/scratch" > "$work/run.out" 2>&1 || { cat "$work/run.out"; fail "the run"; }
+cat "$work/run.out"
+md=$work/out/gpu_bench.md
+[ -s "$md" ] || fail "no gpu_bench.md"
+# One table row per configuration and size.
+for config in small_v2 small paper_v2 paper; do
+  for size in 64x48 96x64; do
+    grep -q "^| $config | [0-9.]*M | [0-9]*+[0-9]* | $size | " "$md" || fail "no row for $config at $size"
+  done
+done
+echo "PASS"

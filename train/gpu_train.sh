@@ -1,0 +1,197 @@
+#!/usr/bin/env bash
+# Fine-tune the shipped weights on a GPU machine that has a CUDA PyTorch and
+# nothing else (no Debian -dev packages, no network), within a fixed lease:
+#
+#   1. builds the LibTorch-only targets (model/, synth/, train/) against that
+#      PyTorch's LibTorch (skipped when the build folder is already built);
+#   2. converts photographs for photo textures to PPM, which every build reads
+#      (by default the photos of the machine's scikit-image data folder, never
+#      motorcycle_*, which bench/motorcycle_check.sh evaluates on);
+#   3. trains from --init (the shipped weights) for --minutes of wall-clock
+#      time, with scenes generated on the device, a learning-rate warm-up
+#      (the optimiser's moments start empty) and a checkpoint folder that a
+#      rerun on the same machine resumes;
+#   4. evaluates the new and the starting weights on the 20 validation scenes
+#      (640x512, N = 5, hint widened x = 1, 3, 10 and none);
+#   5. leaves in --out (default $OUT, else out/gpu_train): the new weights,
+#      the training log, both tables and summary.md (the commands and numbers
+#      to paste into models/README.md). At most 8 files, each under 16 MiB,
+#      as the device tool brings back.
+#
+# On the device (10 minutes per command, 15 per session, start-up included):
+#   call 1:  train/gpu_train.sh --build_only          (a few minutes)
+#   call 2:  train/gpu_train.sh --minutes 7           (training + evaluation)
+# One call with a shorter --minutes also works: the build is skipped when done.
+# Here, on a CPU, the same script runs at a tiny size as the ctest
+# train_gpu_script_dry_run (train/CMakeLists.txt), so that a session with a
+# device spends its minutes training, not debugging.
+set -euo pipefail
+
+usage() {
+  sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'
+  cat <<'EOF'
+Options (default):
+  --minutes M              training wall-clock minutes (7)
+  --height H --width W     training image size (384 512)
+  --batch B                samples per step (8)
+  --sources N              source views per training sample (4)
+  --lr LR                  learning rate after the warm-up (2e-4)
+  --warmup K               learning-rate warm-up steps (100)
+  --seed S                 run seed (derived from --init's checksum, so each new
+                           set of weights trains on new scenes)
+  --init FILE              starting weights (models/dispmvs_small.safetensors)
+  --config NAME            network config, must fit --init (small_v2)
+  --device D               cuda | cuda:I | cpu (cuda)
+  --photos DIR             photographs for textures (the scikit-image data folder
+                           found by python3; none if there is none)
+  --val_scenes K           evaluation scenes (20)
+  --eval_height H --eval_width W   evaluation size (512 640)
+  --build DIR              build folder (build-gpu)
+  --out DIR                results ($OUT, else out/gpu_train)
+  --work DIR               checkpoints and converted photos (/tmp/dispmvs_gpu_train)
+  --build_only             configure and build, then stop
+  --configure_only         configure the build folder, then stop (a check of the
+                           LibTorch-only CMake flavour)
+EOF
+}
+
+root=$(cd "$(dirname "$0")/.." && pwd)
+minutes=7 height=384 width=512 batch=8 sources=4 lr=2e-4 warmup=100 seed=""
+init="$root/models/dispmvs_small.safetensors" config=small_v2 device=cuda photos=""
+val_scenes=20 eval_height=512 eval_width=640 build="$root/build-gpu"
+out=${OUT:-$root/out/gpu_train} work=/tmp/dispmvs_gpu_train build_only=0 configure_only=0
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --minutes) minutes=$2; shift 2 ;;
+    --height) height=$2; shift 2 ;;
+    --width) width=$2; shift 2 ;;
+    --batch) batch=$2; shift 2 ;;
+    --sources) sources=$2; shift 2 ;;
+    --lr) lr=$2; shift 2 ;;
+    --warmup) warmup=$2; shift 2 ;;
+    --seed) seed=$2; shift 2 ;;
+    --init) init=$2; shift 2 ;;
+    --config) config=$2; shift 2 ;;
+    --device) device=$2; shift 2 ;;
+    --photos) photos=$2; shift 2 ;;
+    --val_scenes) val_scenes=$2; shift 2 ;;
+    --eval_height) eval_height=$2; shift 2 ;;
+    --eval_width) eval_width=$2; shift 2 ;;
+    --build) build=$2; shift 2 ;;
+    --out) out=$2; shift 2 ;;
+    --work) work=$2; shift 2 ;;
+    --build_only) build_only=1; shift ;;
+    --configure_only) configure_only=1; shift ;;
+    -h|--help) usage; exit 0 ;;
+    *) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
+  esac
+done
+
+log() { echo "[gpu_train $(date -u +%H:%M:%S)] $*"; }
+mkdir -p "$out" "$work"
+
+# --- 1. Build (cmake/build_torch_only.sh).
+source "$root/cmake/build_torch_only.sh"
+if [ "$configure_only" = 1 ]; then
+  build_torch_only "$root" "$build" "$work" 1
+  log "configured $build"
+  exit 0
+fi
+# dispmvs_bench too, so that bench/gpu_bench.sh finds it built.
+build_torch_only "$root" "$build" "$work" 0 dispmvs_train dispmvs_bench
+train="$build/src/dispmvs_train"
+[ -x "$train" ] || { echo "error: $train was not built" >&2; exit 1; }
+if [ "$build_only" = 1 ]; then
+  log "built $train"
+  exit 0
+fi
+[ -f "$init" ] || { echo "error: --init $init: no such file" >&2; exit 1; }
+[ -n "$seed" ] || seed=$(cksum < "$init" | cut -d' ' -f1)
+
+# --- 2. Photos as PPM (the LibTorch-only build decodes no other format).
+if [ -z "$photos" ]; then
+  photos=$(python3 -c 'import os, skimage.data as d; print(os.path.dirname(d.__file__))' 2>/dev/null || true)
+fi
+photo_options=()
+if [ -n "$photos" ] && [ -d "$photos" ]; then
+  rm -rf "$work/photos" && mkdir -p "$work/photos"
+  for f in "$photos"/*; do
+    name=$(basename "$f")
+    case "$name" in
+      motorcycle*) continue ;;  # evaluation data (bench/motorcycle_check.sh)
+      *.ppm|*.pgm|*.PPM|*.PGM) cp "$f" "$work/photos/" ;;
+      *.png|*.jpg|*.jpeg|*.bmp|*.tif|*.tiff|*.PNG|*.JPG|*.JPEG)
+        python3 - "$f" "$work/photos/${name%.*}.ppm" <<'EOF' 2>/dev/null || true
+import sys
+try:
+    from PIL import Image
+    Image.open(sys.argv[1]).convert("RGB").save(sys.argv[2])
+except ImportError:
+    import cv2  # opencv-python, where Pillow is missing
+    image = cv2.imread(sys.argv[1], cv2.IMREAD_COLOR)
+    if image is None or not cv2.imwrite(sys.argv[2], image):
+        sys.exit(1)
+EOF
+        ;;
+    esac
+  done
+  count=$(find "$work/photos" -maxdepth 1 -name '*.p?m' | wc -l)
+  if [ "$count" -gt 0 ]; then
+    log "$count photos from $photos"
+    photo_options=(--texture_dir "$work/photos" --photo_probability 0.3)
+  else
+    log "no usable photos in $photos: procedural textures only"
+  fi
+else
+  log "no photo folder: procedural textures only"
+fi
+
+# --- 3. Train (resumes from $work/ckpt when rerun on the same machine).
+command=("$train" --checkpoint_dir "$work/ckpt" --config "$config" --device "$device"
+         --height "$height" --width "$width" --sources "$sources" --batch "$batch"
+         --steps 100000000 --lr "$lr" --lr_warmup_steps "$warmup" --train_widening_max 3
+         --seed "$seed" --scene_reuse 4 --checkpoint_every 200 --validate_every 0
+         --val_scenes "$(( val_scenes < 8 ? val_scenes : 8 ))"
+         --init_weights "$init" "${photo_options[@]}" --max_minutes "$minutes")
+log "training: ${command[*]}"
+# Every 50th step line and all other lines on the terminal, everything in the log.
+set +o pipefail
+"${command[@]}" 2>&1 | tee "$out/train.log" | awk '!/^step / || NR % 50 == 1'
+status=${PIPESTATUS[0]}
+set -o pipefail
+[ "$status" = 0 ] || { echo "error: training failed with status $status (see $out/train.log)" >&2; exit 1; }
+weights="$out/dispmvs_$config.safetensors"
+cp "$work/ckpt/model.safetensors" "$weights"
+
+# --- 4. Evaluate both the new and the starting weights on the same scenes.
+widenings=1,3,10,none
+[[ "$config" == *_v2 ]] || widenings=1,3,10
+evaluate() {
+  "$train" --evaluate "$1" --device "$device" --height "$eval_height" --width "$eval_width" \
+    --sources 5 --val_scenes "$val_scenes" --widenings "$widenings" > "$2" 2>&1 ||
+    { cat "$2"; echo "error: evaluation of $1 failed" >&2; exit 1; }
+}
+log "evaluating the new weights"
+evaluate "$weights" "$out/eval_new.txt"
+log "evaluating the starting weights"
+evaluate "$init" "$out/eval_init.txt"
+
+# --- 5. Summary.
+steps=$(grep -c '^step ' "$out/train.log" || true)
+{
+  echo "# GPU fine-tuning, $(date -u +%Y-%m-%d)"
+  echo
+  echo "Device: $device ($(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1 || echo n/a))."
+  echo "Steps this run: $steps; $minutes min of training."
+  echo
+  echo '```sh'
+  echo "${command[*]}" | sed "s|$root/||g; s|$work|WORK|g"
+  echo '```'
+  echo
+  echo "## New weights"
+  echo '```'; cat "$out/eval_new.txt"; echo '```'
+  echo
+  echo "## Starting weights"
+  echo '```'; cat "$out/eval_init.txt"; echo '```'
+} > "$out/summary.md"
+log "done: $weights, $out/summary.md"

@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# Dry run of train/gpu_train.sh on the CPU at a tiny size (the ctest
+# train_gpu_script_dry_run): every step of the GPU script runs here as it will
+# on a device machine, so that a lent GPU's minutes go to training.
+#   gpu_train_dry_run_test.sh SCRIPT BUILD_DIR WORK_DIR
+set -euo pipefail
+script=$1 build=$2 work=$3
+rm -rf "$work" && mkdir -p "$work/photos"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+
+# The LibTorch-only CMake flavour configures (a GPU machine builds it).
+"$script" --configure_only --build "$work/torch_only" --out "$work/out" --work "$work/scratch" \
+  > "$work/configure.out" 2>&1 || { cat "$work/configure.out" "$work/scratch/configure.log"; fail "configure"; }
+grep -q "full build = OFF" "$work/scratch/configure.log" || fail "not the LibTorch-only flavour"
+
+# Two photos as PPM: a 32x24 colour ramp, and a motorcycle_* one (evaluation
+# data: it must be left out).
+ramp() {
+  printf 'P6\n32 24\n255\n'
+  for ((y = 0; y < 24; y++)); do for ((x = 0; x < 32; x++)); do printf "\\$(printf %o $((x * 8)))\\$(printf %o $((y * 10)))\\100"; done; done
+}
+ramp > "$work/photos/ramp.ppm"
+cp "$work/photos/ramp.ppm" "$work/photos/motorcycle_left.ppm"
+
+"$script" --device cpu --minutes 1 --height 64 --width 96 --batch 1 --val_scenes 1 \
+  --eval_height 64 --eval_width 96 --photos "$work/photos" --build "$build" \
+  --out "$work/out" --work "$work/scratch" > "$work/run.out" 2>&1 || { cat "$work/run.out"; fail "the run"; }
+cat "$work/run.out"
+
+out=$work/out
+grep -q "1 photos from" "$work/run.out" || fail "photos: motorcycle_* not left out, or the ramp not used"
+grep -q -- "--texture_dir" "$out/train.log" "$out/summary.md" || fail "photos not passed to training"
+grep -q "stopping after step [0-9]*: --max_minutes reached" "$out/train.log" || fail "no --max_minutes stop in the log"
+[ -s "$out/dispmvs_small_v2.safetensors" ] || fail "no weights"
+for table in eval_new eval_init; do
+  for x in 1.000 3.000 10.00 none; do
+    grep -q "^x=$x  <1%: " "$out/$table.txt" || fail "$table.txt lacks the row x=$x"
+  done
+done
+grep -q "^## New weights" "$out/summary.md" && grep -q "^## Starting weights" "$out/summary.md" || fail "summary.md"
+# The new weights differ from the starting ones (they trained) and load.
+! cmp -s "$out/dispmvs_small_v2.safetensors" "$(dirname "$script")/../models/dispmvs_small.safetensors" ||
+  fail "the weights did not change"
+[ "$(find "$out" -type f | wc -l)" -le 8 ] || fail "more than 8 files in the output (the device brings back 8)"
+echo "PASS"
