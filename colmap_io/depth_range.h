@@ -5,10 +5,10 @@
 // and high percentiles and widen them by a margin.
 //
 // For DispMVS the range is only a HINT (random initialisation and loss
-// normalisation, see docs/method-notes.md): nothing is clipped to it. An image
-// that sees too few points is therefore reported invalid instead of being
-// given an invented range; the caller chooses a fallback, for instance
-// FallbackDepthRange() below.
+// normalisation, see docs/method.md, section 1 "The depth-range hint"):
+// nothing is clipped to it. An image that sees too few points is therefore
+// reported invalid instead of being given an invented range; the caller
+// chooses a fallback, for instance FallbackDepthRange() below.
 
 #include <cstddef>
 #include <map>

@@ -1,6 +1,7 @@
 #pragma once
 // Epipolar correlation of DispMVS: the 2D cost volume that the update block
-// reads at every iteration (paper Eq. 8, method-notes "Correlation").
+// reads at every iteration (paper Eq. 12, docs/method.md section 6
+// "Correlation").
 //
 // Built once per stage from the source-view features; then, for every
 // reference pixel, Lookup() samples `samples` points per pyramid level along

@@ -313,7 +313,7 @@ DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, Updat
       torch::relu(in.context.narrow(1, hid, in.context.size(1) - hid)), n);
 
   // Base point and direction are fixed for the whole stage; the E-flow is the
-  // offset from the base (method notes, "E-flow").
+  // offset from the base (docs/method.md, section 4 "E-flow").
   torch::Tensor state = in.init_inv_depth;  // [B,1,h,w], detached
   if (!state.defined()) {
     if (!volume) throw std::logic_error("DispMvsNet: a match start needs the segment volume");

@@ -1,5 +1,6 @@
 // Epipolar geometry of DispMVS. See geometry.h for the conventions and
-// ../shared/docs/method-notes.md ("Geometry") for the derivations.
+// docs/method.md (sections 2-5, "The epipolar line of a reference pixel" to
+// "Triangulation") for the derivations.
 //
 // Two rules hold in every function below:
 //  * Degenerate geometry is detected with thresholds RELATIVE to the

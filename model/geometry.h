@@ -1,7 +1,8 @@
 #pragma once
 // Epipolar geometry of DispMVS, in batched, differentiable LibTorch ops.
 // Read this file against the paper (Sec. "Flow and Depth", "E-flow") and
-// docs in ../shared/docs/method-notes.md.
+// docs/method.md, sections 1-5 (conventions, epipolar line and segment,
+// E-flow, triangulation), which derives every formula below.
 //
 // Conventions
 //  * Pixel coordinates are in the pixel-index convention of the tensor the

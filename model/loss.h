@@ -1,6 +1,7 @@
 #pragma once
-// Training loss of DispMVS (paper Eq. 10): L1 between normalised inverse
-// depths, summed over every iteration of both stages.
+// Training loss of DispMVS (paper Eq. 14, normalisation Eq. 16; docs/method.md
+// section 9): L1 between normalised inverse depths, summed over every
+// iteration of both stages.
 
 #include <vector>
 

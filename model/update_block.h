@@ -21,7 +21,8 @@
 namespace dispmvs::model {
 
 // GRU whose gates are two separable convolutions: first 1x5 (horizontal
-// context), then 5x1 (vertical), each a full GRU step (paper Eq. 12).
+// context), then 5x1 (vertical), each a full GRU step (paper Eq. 17, in the
+// supplement; docs/method.md section 7).
 class SepConvGruImpl : public torch::nn::Module {
  public:
   SepConvGruImpl(int64_t hidden_channels, int64_t input_channels);
