@@ -15,7 +15,7 @@ set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
 device=cuda sizes=640x512,1600x1152 configs=small_v2,small,paper_v2,paper sources=5 reps=5 warmup=2
-build="$root/build-gpu" out=${OUT:-$root/out/gpu_bench} work=/tmp/dispmvs_gpu_bench
+build="$root/build-gpu" out=${OUT:-$root/out/gpu_bench} work=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --device) device=$2; shift 2 ;;
@@ -34,6 +34,7 @@ while [ $# -gt 0 ]; do
     *) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
+[ -n "$work" ] || work="$build/gpu_bench"  # logs and the raw table
 mkdir -p "$out" "$work"
 source "$root/cmake/build_torch_only.sh"
 build_torch_only "$root" "$build" "$work" 0 dispmvs_bench

@@ -48,7 +48,8 @@ Options (default):
   --eval_height H --eval_width W   evaluation size (512 640)
   --build DIR              build folder (build-gpu)
   --out DIR                results ($OUT, else out/gpu_train)
-  --work DIR               checkpoints and converted photos (/tmp/dispmvs_gpu_train)
+  --work DIR               checkpoints and converted photos (BUILD/gpu_train: kept
+                           between device calls, like the build)
   --build_only             configure and build, then stop
   --configure_only         configure the build folder, then stop (a check of the
                            LibTorch-only CMake flavour)
@@ -59,7 +60,7 @@ root=$(cd "$(dirname "$0")/.." && pwd)
 minutes=7 height=384 width=512 batch=8 sources=4 lr=2e-4 warmup=100 seed=""
 init="$root/models/dispmvs_small.safetensors" config=small_v2 device=cuda photos=""
 val_scenes=20 eval_height=512 eval_width=640 build="$root/build-gpu"
-out=${OUT:-$root/out/gpu_train} work=/tmp/dispmvs_gpu_train build_only=0 configure_only=0
+out=${OUT:-$root/out/gpu_train} work="" build_only=0 configure_only=0
 while [ $# -gt 0 ]; do
   case "$1" in
     --minutes) minutes=$2; shift 2 ;;
@@ -88,6 +89,7 @@ while [ $# -gt 0 ]; do
 done
 
 log() { echo "[gpu_train $(date -u +%H:%M:%S)] $*"; }
+[ -n "$work" ] || work="$build/gpu_train"
 mkdir -p "$out" "$work"
 
 # --- 1. Build (cmake/build_torch_only.sh).
