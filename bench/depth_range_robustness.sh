@@ -58,7 +58,7 @@ while [ $# -gt 0 ]; do
     *) die "unknown option $1" ;;
   esac
 done
-for program in src/dispmvs_synth src/dispmvs_colmap eval/dispmvs_eval; do
+for program in src/dispmvs_synth src/dispmvs_colmap src/dispmvs_eval; do
   [ -x "$build/$program" ] || die "$build/$program is missing: build the project first"
 done
 [ "$sources" -lt "$views" ] || die "--sources must be smaller than --views"
@@ -92,7 +92,7 @@ for x in $widenings; do
         ${extra[@]+"${extra[@]}"} > "$ws/dispmvs_colmap.log" 2>&1 ||
         die "dispmvs_colmap failed on $ws (see $ws/dispmvs_colmap.log)"
       tail -n 3 "$ws/dispmvs_colmap.log"
-      "$build/eval/dispmvs_eval" --workspace_path "$ws" \
+      "$build/src/dispmvs_eval" --workspace_path "$ws" \
         --types dispmvs.photometric,dispmvs.geometric --ply "$ws/fused.ply" \
         --json "$ws/eval.json" --tsv "$ws/eval.tsv.tmp" > "$ws/eval.txt" ||
         die "dispmvs_eval failed on $ws"

@@ -28,7 +28,6 @@
 #include <cstdlib>
 #include <fstream>
 #include <iostream>
-#include <optional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -47,6 +46,8 @@
 #endif
 
 #include "model/config.h"
+#include "model/device.h"
+#include "src/program_main.h"
 #include "model/dispmvs_net.h"
 #include "model/stage_timer.h"
 
@@ -87,7 +88,7 @@ constexpr const char* kUsage =
     "                           paper_v2, small_v2 (model v2: segment volume, match start) (small)\n"
     "  --coarse_iterations N    override the configuration's GRU iterations (0: keep)\n"
     "  --fine_iterations N      same for the fine stage\n"
-    "  --device cpu|cuda|cuda:I (default cpu)\n"
+    "  --device cpu|cuda|cuda:<index> (default cpu)\n"
     "  --threads T[,T...]       intra-op CPU threads (default 2)\n"
     "  --warmup N               untimed passes first (default 1)\n"
     "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n";
@@ -171,23 +172,6 @@ Options ParseArgs(int argc, char** argv) {
     throw std::invalid_argument("--sizes, --threads and --config need at least one value");
   }
   return o;
-}
-
-torch::Device ParseDevice(const std::string& name) {
-  std::optional<torch::Device> device;
-  try {
-    device = torch::Device(name);
-  } catch (const std::exception&) {
-  }
-  if (!device || (!device->is_cpu() && !device->is_cuda())) {
-    throw std::invalid_argument("--device must be cpu, cuda or cuda:I, got '" + name + "'");
-  }
-  if (device->is_cuda() && !torch::cuda::is_available()) {
-    throw std::invalid_argument("--device " + name +
-                                ": this LibTorch has no usable CUDA device (build against a "
-                                "CUDA LibTorch on a GPU machine)");
-  }
-  return *device;
 }
 
 // A plausible rig: reference at the origin, sources on a line, scene 2-6
@@ -428,9 +412,9 @@ int64_t CountParameters(DispMvsNet& net) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
+  return dispmvs::cli::RunProgram([&] {
     const Options o = ParseArgs(argc, argv);
-    const torch::Device device = ParseDevice(o.device);
+    const torch::Device device = dispmvs::model::ParseUsableDevice(o.device, "--device");
     torch::manual_seed(0);
     torch::NoGradGuard no_grad;
     std::vector<int64_t> thread_counts = o.threads;
@@ -528,8 +512,5 @@ int main(int argc, char** argv) {
       std::printf(" %.1f%% |\n", 100.0 * r.m.other_share);
     }
     return 0;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "dispmvs_bench: %s\n", e.what());
-    return 1;
-  }
+  });
 }

@@ -15,6 +15,8 @@
 
 #include "bench/npy_reader.h"
 #include "bench/stereo_pair_workspace.h"
+#include "src/program_main.h"
+#include "src/program_options.h"
 
 namespace {
 
@@ -119,12 +121,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   // clang-format on
 
   po::variables_map values;
-  po::store(po::parse_command_line(argc, argv, description), values);
-  if (values.count("help") > 0) {
-    std::cout << description << '\n';
-    return std::nullopt;
-  }
-  po::notify(values);
+  if (!cli::ParseCommandLine(argc, argv, description, &values)) return std::nullopt;
   o.left = RequiredPath(values, "left");
   o.right = RequiredPath(values, "right");
   o.disparity = RequiredPath(values, "disparity");
@@ -171,19 +168,8 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
+  return dispmvs::cli::RunProgram([&] {
     const std::optional<Options> options = ParseCommandLine(argc, argv);
-    if (!options) return 0;
-    return Run(*options);
-  } catch (const std::exception& error) {
-    std::string message = error.what();
-    for (char& c : message) {
-      if (c == '\n' || c == '\r') c = ' ';
-    }
-    std::cerr << "error: " << message << '\n';
-    return 1;
-  } catch (...) {
-    std::cerr << "error: unknown exception\n";
-    return 1;
-  }
+    return options ? Run(*options) : 0;
+  });
 }

@@ -39,7 +39,7 @@ fail() { echo "error: $*" >&2; exit 1; }
 
 converter=$build/bench/dispmvs_stereo_pair_workspace
 colmap_dense=$build/src/dispmvs_colmap
-evaluate=$build/eval/dispmvs_eval
+evaluate=$build/src/dispmvs_eval
 for program in "$converter" "$colmap_dense" "$evaluate"; do
   [ -x "$program" ] || fail "$program is missing: cmake --build $build --target $(basename "$program")"
 done

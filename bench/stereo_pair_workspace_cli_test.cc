@@ -3,7 +3,6 @@
 // dispmvs_eval accepts and scores as a rectified pair.
 
 #include <gtest/gtest.h>
-#include <sys/wait.h>
 
 #include <cstdlib>
 #include <sstream>
@@ -14,6 +13,7 @@
 
 #include "bench/npy_test_util.h"
 #include "colmap_io/dense_array.h"
+#include "tests/support/run_program.h"
 #include "tests/support/temp_dir.h"
 
 #ifndef DISPMVS_STEREO_PAIR_PROGRAM
@@ -34,31 +34,8 @@ using dispmvs::testing::WriteFileBytes;
 constexpr int kWidth = 16, kHeight = 10;
 constexpr double kFocal = 20, kDoffs = 1, kBaseline = 0.5;
 
-struct RunResult {
-  int status = -1;
-  std::string out, err;
-};
-
-RunResult RunProgram(const TempDir& dir, const char* program, const std::string& args) {
-  const fs::path out = dir.path() / "stdout.txt";
-  const fs::path err = dir.path() / "stderr.txt";
-  const std::string command = std::string("'") + program + "' " + args + " >'" + out.string() +
-                              "' 2>'" + err.string() + "'";
-  const int raw = std::system(command.c_str());
-  RunResult result;
-  result.status = WIFEXITED(raw) ? WEXITSTATUS(raw) : -1;
-  result.out = ReadFileBytes(out);
-  result.err = ReadFileBytes(err);
-  return result;
-}
-
-void ExpectError(const RunResult& result, const std::string& fragment) {
-  EXPECT_EQ(result.status, 1) << result.out << result.err;
-  EXPECT_EQ(result.err.rfind("error: ", 0), 0u) << result.err;
-  ASSERT_FALSE(result.err.empty());
-  EXPECT_EQ(result.err.find('\n'), result.err.size() - 1) << result.err;
-  EXPECT_NE(result.err.find(fragment), std::string::npos) << result.err;
-}
+using dispmvs::testing::ExpectError;
+using dispmvs::testing::RunProgram;
 
 std::vector<std::string> Fields(const std::string& line) {
   std::vector<std::string> fields;
@@ -102,7 +79,7 @@ class StereoPairCliTest : public ::testing::Test {
 };
 
 TEST_F(StereoPairCliTest, Help) {
-  const RunResult run = RunProgram(dir_, DISPMVS_STEREO_PAIR_PROGRAM, "--help");
+  const dispmvs::testing::ProgramRun run = RunProgram(dir_, DISPMVS_STEREO_PAIR_PROGRAM, "--help");
   EXPECT_EQ(run.status, 0);
   EXPECT_NE(run.out.find("Usage: dispmvs_stereo_pair_workspace --left"), std::string::npos);
   EXPECT_NE(run.out.find("depth-range hint"), std::string::npos);
@@ -143,7 +120,7 @@ TEST_F(StereoPairCliTest, Errors) {
 }
 
 TEST_F(StereoPairCliTest, DispmvsEvalScoresTheWorkspaceAsARectifiedPair) {
-  const RunResult made = RunProgram(dir_, DISPMVS_STEREO_PAIR_PROGRAM,
+  const dispmvs::testing::ProgramRun made = RunProgram(dir_, DISPMVS_STEREO_PAIR_PROGRAM,
                              Inputs() + " " + Calibration() + " " + Output() +
                                  " --num_sparse_points 50");
   ASSERT_EQ(made.status, 0) << made.out << made.err;
@@ -167,7 +144,7 @@ TEST_F(StereoPairCliTest, DispmvsEvalScoresTheWorkspaceAsARectifiedPair) {
         map, ws() / "stereo" / "depth_maps" / ("left.png." + std::string(type) + ".bin"));
   }
   const fs::path tsv = dir_.path() / "eval.tsv";
-  const RunResult eval = RunProgram(dir_, DISPMVS_EVAL_PROGRAM,
+  const dispmvs::testing::ProgramRun eval = RunProgram(dir_, DISPMVS_EVAL_PROGRAM,
                              "--workspace_path '" + ws().string() +
                                  "' --types exact,half_px,one_and_half_px --tsv '" + tsv.string() +
                                  "'");

@@ -176,53 +176,71 @@ std::string CheckPoint3D(const Point3D& point) {
 // ---------------------------------------------------------------------------
 // Cross-file validation
 
-void ValidateSparseModel(const SparseModel& model, const std::string& source_name) {
-  auto fail = [&](const std::string& what) { throw IoError(source_name, what); };
+namespace {
 
-  // Map keys and the ids inside the records must agree; a writer would
-  // otherwise silently store a different id than the caller looked up.
+[[noreturn]] void Fail(const std::string& source_name, const std::string& what) {
+  throw IoError(source_name, what);
+}
+
+// For each image: the image, and which of its points2D some track lists.
+struct Observations {
+  const Image* image;
+  std::vector<bool> listed;
+};
+
+// Map keys and the ids inside the records must agree; a writer would
+// otherwise silently store a different id than the caller looked up.
+void ValidateCameras(const SparseModel& model, const std::string& source_name) {
   for (const auto& [id, camera] : model.cameras) {
     if (camera.camera_id != id) {
-      fail("camera stored under id " + std::to_string(id) + " has camera_id " +
-           std::to_string(camera.camera_id));
+      Fail(source_name, "camera stored under id " + std::to_string(id) + " has camera_id " +
+                            std::to_string(camera.camera_id));
     }
     if (const std::string problem = internal::CheckCamera(camera); !problem.empty()) {
-      fail("camera " + std::to_string(id) + ": " + problem);
+      Fail(source_name, "camera " + std::to_string(id) + ": " + problem);
     }
   }
+}
+
+// Images: ids, values, cameras that exist, unique names. Returns the
+// observation marks, none listed yet.
+std::unordered_map<image_t, Observations> ValidateImages(const SparseModel& model,
+                                                          const std::string& source_name) {
   std::unordered_map<std::string, image_t> image_ids_by_name;
-  // For each image: the image, and which of its points2D some track lists.
-  struct Observations {
-    const Image* image;
-    std::vector<bool> listed;
-  };
   std::unordered_map<image_t, Observations> observations;
   for (const auto& [id, image] : model.images) {
     if (image.image_id != id) {
-      fail("image stored under id " + std::to_string(id) + " has image_id " +
-           std::to_string(image.image_id));
+      Fail(source_name, "image stored under id " + std::to_string(id) + " has image_id " +
+                            std::to_string(image.image_id));
     }
     if (const std::string problem = internal::CheckImage(image); !problem.empty()) {
-      fail("image " + std::to_string(id) + ": " + problem);
+      Fail(source_name, "image " + std::to_string(id) + ": " + problem);
     }
     if (model.cameras.count(image.camera_id) == 0) {
-      fail("image " + std::to_string(id) + " ('" + image.name + "') uses camera " +
-           std::to_string(image.camera_id) + ", which cameras does not contain");
+      Fail(source_name, "image " + std::to_string(id) + " ('" + image.name + "') uses camera " +
+                            std::to_string(image.camera_id) + ", which cameras does not contain");
     }
     const auto [it, inserted] = image_ids_by_name.emplace(image.name, id);
     if (!inserted) {
-      fail("images " + std::to_string(it->second) + " and " + std::to_string(id) +
-           " have the same name '" + image.name + "'");
+      Fail(source_name, "images " + std::to_string(it->second) + " and " + std::to_string(id) +
+                            " have the same name '" + image.name + "'");
     }
     observations[id] = Observations{&image, std::vector<bool>(image.points2D.size(), false)};
   }
+  return observations;
+}
+
+// Points3D: ids and values, and every track element names an existing
+// point2D that refers back to the point, once; marks it in `observations`.
+void ValidateTracks(const SparseModel& model, const std::string& source_name,
+                    std::unordered_map<image_t, Observations>* observations) {
   for (const auto& [id, point] : model.points3D) {
     if (point.point3D_id != id) {
-      fail("point3D stored under id " + std::to_string(id) + " has point3D_id " +
-           std::to_string(point.point3D_id));
+      Fail(source_name, "point3D stored under id " + std::to_string(id) + " has point3D_id " +
+                            std::to_string(point.point3D_id));
     }
     if (const std::string problem = internal::CheckPoint3D(point); !problem.empty()) {
-      fail("point3D " + std::to_string(id) + ": " + problem);
+      Fail(source_name, "point3D " + std::to_string(id) + ": " + problem);
     }
     for (size_t e = 0; e < point.track.size(); ++e) {
       const TrackElement& el = point.track[e];
@@ -233,37 +251,52 @@ void ValidateSparseModel(const SparseModel& model, const std::string& source_nam
                " (image " + std::to_string(el.image_id) + ", point2D " +
                std::to_string(el.point2D_idx) + ")";
       };
-      const auto found = observations.find(el.image_id);
-      if (found == observations.end()) fail(where() + ": no such image");
+      const auto found = observations->find(el.image_id);
+      if (found == observations->end()) Fail(source_name, where() + ": no such image");
       const Image& image = *found->second.image;
       if (el.point2D_idx >= image.points2D.size()) {
-        fail(where() + ": the image has only " + std::to_string(image.points2D.size()) +
-             " points2D");
+        Fail(source_name, where() + ": the image has only " +
+                              std::to_string(image.points2D.size()) + " points2D");
       }
       if (image.points2D[el.point2D_idx].point3D_id != id) {
-        fail(where() + ": that point2D does not refer back to this point3D");
+        Fail(source_name, where() + ": that point2D does not refer back to this point3D");
       }
       std::vector<bool>& listed = found->second.listed;
-      if (listed[el.point2D_idx]) fail(where() + ": listed twice");
+      if (listed[el.point2D_idx]) Fail(source_name, where() + ": listed twice");
       listed[el.point2D_idx] = true;
     }
   }
-  // Every observation must appear in its point's track (the reverse of the
-  // check above), otherwise tracks and images disagree about what was seen.
-  // The marks replace a points3D lookup per observation, which dominated the
-  // run time on large models; the lookup is only made to word the error.
+}
+
+// Every observation must appear in its point's track (the reverse of
+// ValidateTracks), otherwise tracks and images disagree about what was seen.
+// The marks replace a points3D lookup per observation, which dominated the
+// run time on large models; the lookup is only made to word the error.
+void ValidateObservationsListed(const SparseModel& model, const std::string& source_name,
+                                const std::unordered_map<image_t, Observations>& observations) {
   for (const auto& [id, image] : model.images) {
     const std::vector<bool>& listed = observations.at(id).listed;
     for (size_t k = 0; k < image.points2D.size(); ++k) {
       const point3D_t point3D_id = image.points2D[k].point3D_id;
       if (image.points2D[k].HasPoint3D() && !listed[k]) {
-        fail("image " + std::to_string(id) + " point2D #" + std::to_string(k) +
-             " refers to point3D " + std::to_string(point3D_id) +
-             (model.points3D.count(point3D_id) == 0 ? ", which points3D does not contain"
-                                                    : " but that point's track does not list it"));
+        Fail(source_name,
+             "image " + std::to_string(id) + " point2D #" + std::to_string(k) +
+                 " refers to point3D " + std::to_string(point3D_id) +
+                 (model.points3D.count(point3D_id) == 0
+                      ? ", which points3D does not contain"
+                      : " but that point's track does not list it"));
       }
     }
   }
+}
+
+}  // namespace
+
+void ValidateSparseModel(const SparseModel& model, const std::string& source_name) {
+  ValidateCameras(model, source_name);
+  std::unordered_map<image_t, Observations> observations = ValidateImages(model, source_name);
+  ValidateTracks(model, source_name, &observations);
+  ValidateObservationsListed(model, source_name, observations);
 }
 
 // ---------------------------------------------------------------------------

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "colmap_io/atomic_file.h"
+#include "model/json.h"
 
 namespace dispmvs::eval {
 namespace {
@@ -98,27 +99,8 @@ const std::string& TsvField(const std::string& text, const char* what) {
 
 // ---- JSON ----
 
-std::string JsonString(const std::string& text) {
-  std::string out = "\"";
-  for (const char c : text) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char buffer[8];
-          std::snprintf(buffer, sizeof buffer, "\\u%04x", static_cast<unsigned>(c));
-          out += buffer;
-        } else {
-          out += c;
-        }
-    }
-  }
-  return out + "\"";
-}
+// Control characters, quotes and backslashes escaped (model/json.h).
+std::string JsonString(const std::string& text) { return model::json::Quote(text); }
 
 std::string JsonNumber(double value) {
   if (!std::isfinite(value)) return "null";

@@ -126,43 +126,48 @@ std::vector<std::string> DiscoverDepthMapTypes(const colmap_io::Workspace& works
   return {types.begin(), types.end()};
 }
 
-WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
-                                      const WorkspaceEvalOptions& options) {
-  options.Check();
-  const colmap_io::Workspace workspace(workspace_path);
-  const colmap_io::SparseModel model = workspace.ReadModel();
+namespace {
 
-  WorkspaceEvalReport report;
-  report.workspace = workspace.root().string();
-  report.num_images = static_cast<int>(model.images.size());
+// The images of the model in name order, split by whether they have a GT
+// depth map; throws IoError when the GT folder is missing or holds none.
+struct GroundTruthImages {
+  fs::path dir;
+  std::vector<const colmap_io::Image*> with_gt;
+  std::vector<const colmap_io::Image*> without_gt;
+};
 
-  // Images in name order, and those with a GT depth map.
+GroundTruthImages FindGroundTruthImages(const colmap_io::Workspace& workspace,
+                                        const colmap_io::SparseModel& model) {
   std::vector<const colmap_io::Image*> images;
   for (const auto& [id, image] : model.images) images.push_back(&image);
   std::sort(images.begin(), images.end(),
             [](const auto* a, const auto* b) { return a->name < b->name; });
-  const fs::path gt_dir = GroundTruthDepthDir(workspace);
-  {
-    std::error_code ec;
-    if (!fs::is_directory(gt_dir, ec)) {
-      throw IoError(gt_dir.string(),
-                    "no ground truth: expected a depth map NAME.bin per image in this folder");
-    }
+  GroundTruthImages gt;
+  gt.dir = GroundTruthDepthDir(workspace);
+  std::error_code ec;
+  if (!fs::is_directory(gt.dir, ec)) {
+    throw IoError(gt.dir.string(),
+                  "no ground truth: expected a depth map NAME.bin per image in this folder");
   }
-  std::vector<const colmap_io::Image*> gt_images;
-  std::vector<const colmap_io::Image*> images_without_gt;
   for (const colmap_io::Image* image : images) {
     workspace.ImagePath(image->name);  // refuses names that would leave the workspace
-    (IsFile(gt_dir / (image->name + ".bin")) ? gt_images : images_without_gt).push_back(image);
+    (IsFile(gt.dir / (image->name + ".bin")) ? gt.with_gt : gt.without_gt).push_back(image);
   }
-  if (gt_images.empty()) {
-    throw IoError(gt_dir.string(), "no ground-truth depth map NAME.bin for any of the " +
+  if (gt.with_gt.empty()) {
+    throw IoError(gt.dir.string(), "no ground-truth depth map NAME.bin for any of the " +
                                        std::to_string(images.size()) +
                                        " images of the sparse model");
   }
-  report.views_with_gt = static_cast<int>(gt_images.size());
+  return gt;
+}
 
-  // Types, and which of them have maps (checked before reading anything big).
+// The depth-map types to score (the options', else those found), each with
+// its count of maps of images without GT; throws IoError when no image with
+// GT has a map of any of them (checked before reading anything big).
+std::vector<TypeDepthResult> ChooseTypes(const colmap_io::Workspace& workspace,
+                                         const colmap_io::SparseModel& model,
+                                         const GroundTruthImages& gt,
+                                         const WorkspaceEvalOptions& options) {
   std::vector<std::string> types;
   for (const std::string& type :
        options.types.empty() ? DiscoverDepthMapTypes(workspace, model) : options.types) {
@@ -172,17 +177,18 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
     throw IoError(workspace.DepthMapsDir().string(),
                   "no depth maps NAME.TYPE.bin for the images of the sparse model");
   }
+  std::vector<TypeDepthResult> results;
   bool any_map = false;
   for (const std::string& type : types) {
     TypeDepthResult result;
     result.type = type;
-    for (const colmap_io::Image* image : images_without_gt) {
+    for (const colmap_io::Image* image : gt.without_gt) {
       if (IsFile(workspace.DepthMapPath(image->name, type))) ++result.maps_without_gt;
     }
-    for (const colmap_io::Image* image : gt_images) {
+    for (const colmap_io::Image* image : gt.with_gt) {
       any_map = any_map || IsFile(workspace.DepthMapPath(image->name, type));
     }
-    report.types.push_back(std::move(result));
+    results.push_back(std::move(result));
   }
   if (!any_map) {
     std::string list;
@@ -190,111 +196,111 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
     throw IoError(workspace.DepthMapsDir().string(),
                   "no depth map of type(s) " + list + " for any image with ground truth");
   }
+  return results;
+}
 
-  // Clouds: check the files exist before the long part.
-  const fs::path gt_cloud_path = GroundTruthCloudPath(workspace);
-  const bool evaluate_clouds = !options.ply_paths.empty();
-  const bool gt_cloud_from_maps = evaluate_clouds && !IsFile(gt_cloud_path);
-  for (const std::string& ply : options.ply_paths) {
-    if (!IsFile(ply)) throw IoError(ply, "no such file");
+// What the views of one type add up to.
+struct TypeSums {
+  DepthMetricSums depth;
+  DisparityMetricSums disparity;
+};
+
+// Scores every map of one image with GT, adding to report->types and `sums`;
+// back-projects the GT into `gt_cloud` when given; writes the PNGs when
+// options.png_dir is set.
+void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::SparseModel& model,
+                   const fs::path& gt_dir, const colmap_io::Image& image,
+                   const WorkspaceEvalOptions& options, std::vector<TypeSums>* sums,
+                   PointCloud* gt_cloud, WorkspaceEvalReport* report) {
+  const fs::path gt_path = gt_dir / (image.name + ".bin");
+  const colmap_io::DenseArray gt = ReadDepthMap(gt_path, "ground-truth depth map");
+  const colmap_io::Camera& camera = model.cameras.at(image.camera_id);
+  if (camera.width > colmap_io::kMaxDenseArraySide ||
+      camera.height > colmap_io::kMaxDenseArraySide ||
+      !IsCleanScale(gt.width(), gt.height(), static_cast<int>(camera.width),
+                    static_cast<int>(camera.height))) {
+    throw IoError(gt_path.string(), "ground-truth depth map is " +
+                                        SizeText(gt.width(), gt.height()) +
+                                        " but its camera is " +
+                                        SizeText(camera.width, camera.height));
   }
-
-  // Depth maps, view by view (each GT read once).
-  std::vector<DepthMetricSums> type_sums(types.size());
-  std::vector<DisparityMetricSums> type_disparity_sums(types.size());
-  PointCloud gt_cloud;
+  std::optional<DisparityGeometry> disparity_geometry;
+  if (std::optional<RectifiedPartner> partner = FindRectifiedPartner(model, image.image_id)) {
+    // Disparity in pixels of the GT's resolution, whatever the map's.
+    const double focal =
+        camera.CalibrationMatrix()(0, 0) * gt.width() / static_cast<double>(camera.width);
+    disparity_geometry = DisparityGeometry{std::move(*partner), focal};
+    ++report->views_with_rectified_partner;
+  }
+  if (gt_cloud != nullptr) {
+    try {
+      BackProjectDepthMap(gt, camera, image, options.gt_stride, gt_cloud);
+    } catch (const std::invalid_argument& error) {
+      throw IoError(gt_path.string(), error.what());
+    }
+  }
   const bool write_png = !options.png_dir.empty();
-  for (const colmap_io::Image* image : gt_images) {
-    const fs::path gt_path = gt_dir / (image->name + ".bin");
-    const colmap_io::DenseArray gt = ReadDepthMap(gt_path, "ground-truth depth map");
-    const colmap_io::Camera& camera = model.cameras.at(image->camera_id);
-    if (camera.width > colmap_io::kMaxDenseArraySide ||
-        camera.height > colmap_io::kMaxDenseArraySide ||
-        !IsCleanScale(gt.width(), gt.height(), static_cast<int>(camera.width),
-                      static_cast<int>(camera.height))) {
-      throw IoError(gt_path.string(), "ground-truth depth map is " +
-                                          SizeText(gt.width(), gt.height()) +
-                                          " but its camera is " +
-                                          SizeText(camera.width, camera.height));
-    }
-    std::optional<DisparityGeometry> disparity_geometry;
-    if (std::optional<RectifiedPartner> partner = FindRectifiedPartner(model, image->image_id)) {
-      // Disparity in pixels of the GT's resolution, whatever the map's.
-      const double focal = camera.CalibrationMatrix()(0, 0) * gt.width() /
-                           static_cast<double>(camera.width);
-      disparity_geometry = DisparityGeometry{std::move(*partner), focal};
-      ++report.views_with_rectified_partner;
-    }
-    if (gt_cloud_from_maps) {
-      try {
-        BackProjectDepthMap(gt, camera, *image, options.gt_stride, &gt_cloud);
-      } catch (const std::invalid_argument& error) {
-        throw IoError(gt_path.string(), error.what());
+  DepthRange colour_range;
+  if (write_png) {
+    colour_range = ValidDepthRange(gt);
+    WritePngAtomically(ColouriseDepth(gt, colour_range), PngPath(options.png_dir, image.name, "gt"));
+    ++report->png_files;
+  }
+  for (std::size_t t = 0; t < report->types.size(); ++t) {
+    const std::string& type = report->types[t].type;
+    const fs::path map_path = workspace.DepthMapPath(image.name, type);
+    if (!IsFile(map_path)) continue;
+    const colmap_io::DenseArray map = ReadDepthMap(map_path, "depth map");
+    cv::Mat rel_error;
+    DepthMetricSums view_sums;
+    DisparityMetricSums disparity_sums;
+    try {
+      view_sums = SumDepthMetrics(map, gt, write_png ? &rel_error : nullptr);
+      if (disparity_geometry) {
+        disparity_sums = SumDisparityMetrics(
+            map, gt, disparity_geometry->focal * disparity_geometry->partner.baseline);
       }
+    } catch (const std::invalid_argument& error) {
+      throw IoError(map_path.string(), error.what());
     }
-    DepthRange colour_range;
     if (write_png) {
-      colour_range = ValidDepthRange(gt);
-      WritePngAtomically(ColouriseDepth(gt, colour_range),
-                         PngPath(options.png_dir, image->name, "gt"));
-      ++report.png_files;
+      WritePngAtomically(ColouriseDepth(map, colour_range),
+                         PngPath(options.png_dir, image.name, type + ".depth"));
+      WritePngAtomically(ColouriseRelError(rel_error, options.png_max_rel_error),
+                         PngPath(options.png_dir, image.name, type + ".error"));
+      report->png_files += 2;
     }
-    for (std::size_t t = 0; t < types.size(); ++t) {
-      const fs::path map_path = workspace.DepthMapPath(image->name, types[t]);
-      if (!IsFile(map_path)) continue;
-      const colmap_io::DenseArray map = ReadDepthMap(map_path, "depth map");
-      cv::Mat rel_error;
-      DepthMetricSums sums;
-      DisparityMetricSums disparity_sums;
-      try {
-        sums = SumDepthMetrics(map, gt, write_png ? &rel_error : nullptr);
-        if (disparity_geometry) {
-          disparity_sums = SumDisparityMetrics(
-              map, gt, disparity_geometry->focal * disparity_geometry->partner.baseline);
-        }
-      } catch (const std::invalid_argument& error) {
-        throw IoError(map_path.string(), error.what());
-      }
-      if (write_png) {
-        WritePngAtomically(ColouriseDepth(map, colour_range),
-                           PngPath(options.png_dir, image->name, types[t] + ".depth"));
-        WritePngAtomically(ColouriseRelError(rel_error, options.png_max_rel_error),
-                           PngPath(options.png_dir, image->name, types[t] + ".error"));
-        report.png_files += 2;
-      }
-      ViewDepthResult view;
-      view.image_name = image->name;
-      view.width = map.width();
-      view.height = map.height();
-      view.gt_width = gt.width();
-      view.gt_height = gt.height();
-      view.metrics = Finalize(sums);
-      view.disparity_geometry = disparity_geometry;
-      view.disparity = Finalize(disparity_sums);
-      report.types[t].views.push_back(std::move(view));
-      type_sums[t] += sums;
-      type_disparity_sums[t] += disparity_sums;
-    }
+    ViewDepthResult view;
+    view.image_name = image.name;
+    view.width = map.width();
+    view.height = map.height();
+    view.gt_width = gt.width();
+    view.gt_height = gt.height();
+    view.metrics = Finalize(view_sums);
+    view.disparity_geometry = disparity_geometry;
+    view.disparity = Finalize(disparity_sums);
+    report->types[t].views.push_back(std::move(view));
+    (*sums)[t].depth += view_sums;
+    (*sums)[t].disparity += disparity_sums;
   }
-  for (std::size_t t = 0; t < types.size(); ++t) {
-    report.types[t].overall = Finalize(type_sums[t]);
-    report.types[t].disparity_overall = Finalize(type_disparity_sums[t]);
-    report.types[t].sums = std::move(type_sums[t]);
-    report.types[t].disparity_sums = type_disparity_sums[t];
-  }
+}
 
-  if (!evaluate_clouds) return report;
-
-  // GT cloud and thresholds.
+// The GT cloud (from ground_truth/points.ply, else `cloud_from_maps`), its
+// thresholds, and each reconstruction scored against it.
+void EvaluateClouds(const colmap_io::Workspace& workspace, const fs::path& gt_dir,
+                    bool gt_from_maps, PointCloud cloud_from_maps,
+                    const WorkspaceEvalOptions& options, WorkspaceEvalReport* report) {
+  const fs::path gt_cloud_path = GroundTruthCloudPath(workspace);
+  PointCloud gt_cloud = std::move(cloud_from_maps);
   GtCloudInfo info;
-  if (gt_cloud_from_maps) {
+  if (gt_from_maps) {
     info.source = "ground-truth depth maps (stride " + std::to_string(options.gt_stride) + ")";
   } else {
     info.source = gt_cloud_path.string();
     info.nonfinite_dropped = ToCloud(colmap_io::ReadPlyPoints(gt_cloud_path), &gt_cloud);
   }
   if (gt_cloud.empty()) {
-    throw IoError(gt_cloud_from_maps ? gt_dir.string() : gt_cloud_path.string(),
+    throw IoError(gt_from_maps ? gt_dir.string() : gt_cloud_path.string(),
                   "the ground-truth point cloud is empty");
   }
   info.num_points = static_cast<int64_t>(gt_cloud.size());
@@ -317,9 +323,50 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
     result.nonfinite_dropped = ToCloud(colmap_io::ReadPlyPoints(ply), &points);
     const NearestNeighbourIndex index(std::move(points));
     result.metrics = EvaluateCloud(index, gt_index, info.thresholds);
-    report.clouds.push_back(std::move(result));
+    report->clouds.push_back(std::move(result));
   }
-  report.gt_cloud = info;
+  report->gt_cloud = info;
+}
+
+}  // namespace
+
+WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
+                                      const WorkspaceEvalOptions& options) {
+  options.Check();
+  const colmap_io::Workspace workspace(workspace_path);
+  const colmap_io::SparseModel model = workspace.ReadModel();
+
+  WorkspaceEvalReport report;
+  report.workspace = workspace.root().string();
+  report.num_images = static_cast<int>(model.images.size());
+  const GroundTruthImages gt = FindGroundTruthImages(workspace, model);
+  report.views_with_gt = static_cast<int>(gt.with_gt.size());
+  report.types = ChooseTypes(workspace, model, gt, options);
+
+  // Clouds: check the files exist before the long part.
+  const bool evaluate_clouds = !options.ply_paths.empty();
+  const bool gt_cloud_from_maps = evaluate_clouds && !IsFile(GroundTruthCloudPath(workspace));
+  for (const std::string& ply : options.ply_paths) {
+    if (!IsFile(ply)) throw IoError(ply, "no such file");
+  }
+
+  // Depth maps, view by view (each GT read once).
+  std::vector<TypeSums> sums(report.types.size());
+  PointCloud gt_cloud;
+  for (const colmap_io::Image* image : gt.with_gt) {
+    EvaluateImage(workspace, model, gt.dir, *image, options, &sums,
+                  gt_cloud_from_maps ? &gt_cloud : nullptr, &report);
+  }
+  for (std::size_t t = 0; t < report.types.size(); ++t) {
+    report.types[t].overall = Finalize(sums[t].depth);
+    report.types[t].disparity_overall = Finalize(sums[t].disparity);
+    report.types[t].sums = std::move(sums[t].depth);
+    report.types[t].disparity_sums = sums[t].disparity;
+  }
+
+  if (evaluate_clouds) {
+    EvaluateClouds(workspace, gt.dir, gt_cloud_from_maps, std::move(gt_cloud), options, &report);
+  }
   return report;
 }
 

@@ -88,6 +88,6 @@ step "dispmvs_colmap"
 "$build/src/dispmvs_colmap" --workspace_path "$out/dense" "$@"
 
 step "dispmvs_eval against the ground truth"
-"$build/eval/dispmvs_eval" --workspace_path "$out/dense" \
+"$build/src/dispmvs_eval" --workspace_path "$out/dense" \
   --types dispmvs.photometric,dispmvs.geometric --ply "$out/dense/fused.ply" \
   --json "$out/eval.json"

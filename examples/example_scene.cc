@@ -7,22 +7,20 @@
 
 #include <Eigen/Geometry>
 
+#include "synth/rng.h"
+
 namespace dispmvs::examples {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
 
-// SplitMix64 finaliser: a well-mixed 64-bit hash, identical on every platform
-// (unlike std::hash), so the texture only depends on the seed.
-uint64_t Mix(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
+// SplitMix64 rather than std::hash: identical on every platform, so the
+// texture only depends on the seed.
+using synth::SplitMix64;
 
 double LatticeValue(int64_t ix, int64_t iy, uint64_t salt) {
-  const uint64_t h = Mix(Mix(Mix(salt) ^ static_cast<uint64_t>(ix)) ^ static_cast<uint64_t>(iy));
+  const uint64_t h =
+      SplitMix64(SplitMix64(SplitMix64(salt) ^ static_cast<uint64_t>(ix)) ^ static_cast<uint64_t>(iy));
   return static_cast<double>(h >> 11) * 0x1.0p-53;  // [0, 1)
 }
 
@@ -151,13 +149,13 @@ double ExampleScene::Albedo(const Eigen::Vector2d& uv, int channel, Surface surf
       {0.75, 0.55, 0.35}, {0.95, 0.60, 0.40}, {0.50, 0.50, 0.50},
   };
   const int index = SurfaceIndex(surface);
-  const uint64_t surface_salt = Mix(seed_ * 31u + static_cast<uint64_t>(index));
+  const uint64_t surface_salt = SplitMix64(seed_ * 31u + static_cast<uint64_t>(index));
   // Mostly shared luminance detail (6 octaves: features from 0.7 scene units
   // down to about 1/50, the size of a pixel at the far end of the views) plus
   // a coarser per-channel tint.
   const double luminance = FractalNoise(uv, 1.5, 6, surface_salt);
   const double tint =
-      FractalNoise(uv, 1.0, 2, Mix(surface_salt + 1u + static_cast<uint64_t>(channel)));
+      FractalNoise(uv, 1.0, 2, SplitMix64(surface_salt + 1u + static_cast<uint64_t>(channel)));
   double value = 0.5 + 2.2 * (0.75 * luminance + 0.25 * tint - 0.5);
   // A sparse grid of dark lines on the ground: sharp, unambiguous structure.
   if (surface == Surface::kGround) {

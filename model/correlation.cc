@@ -10,15 +10,6 @@ namespace {
 
 namespace F = torch::nn::functional;
 
-std::string ShapeOf(const torch::Tensor& t) {
-  std::string s = "[";
-  for (int64_t d = 0; d < t.dim(); ++d) {
-    if (d > 0) s += ",";
-    s += std::to_string(t.size(d));
-  }
-  return s + "]";
-}
-
 void CheckShape(const torch::Tensor& t, const char* name, int64_t batch, int64_t channels,
                 int64_t height, int64_t width) {
   if (!t.defined() || t.dim() != 4 || t.size(0) != batch || t.size(1) != channels ||
@@ -27,7 +18,7 @@ void CheckShape(const torch::Tensor& t, const char* name, int64_t batch, int64_t
                                 " must be [" + std::to_string(batch) + "," +
                                 std::to_string(channels) + "," + std::to_string(height) + "," +
                                 std::to_string(width) + "], got " +
-                                (t.defined() ? ShapeOf(t) : std::string("undefined")));
+                                (t.defined() ? c10::str(t.sizes()) : std::string("undefined")));
   }
 }
 
@@ -40,7 +31,7 @@ EpipolarCorrelation::EpipolarCorrelation(const torch::Tensor& source_features, i
       source_features.size(1) < 1 || source_features.size(2) < 1 || source_features.size(3) < 1) {
     throw std::invalid_argument(
         "EpipolarCorrelation: source_features must be a non-empty [B,C,H,W] tensor, got " +
-        (source_features.defined() ? ShapeOf(source_features) : std::string("undefined")));
+        (source_features.defined() ? c10::str(source_features.sizes()) : std::string("undefined")));
   }
   if (levels < 1 || levels > 16) {
     throw std::invalid_argument("EpipolarCorrelation: levels must be in [1,16], got " +

@@ -16,13 +16,6 @@ namespace {
 
 namespace F = torch::nn::functional;
 
-// Runs f() as one section of `stage` (no-op timing when timer is null).
-template <typename Fn>
-auto Timed(StageTimer* timer, NetStage stage, Fn&& f) -> decltype(f()) {
-  const StageTimer::Section section(timer, stage);
-  return f();
-}
-
 // A map and the mask of where it holds a value.
 struct MaskedMap {
   torch::Tensor value;  // [B,C,H,W], 0 where invalid
@@ -115,16 +108,6 @@ torch::Tensor RepeatPerSource(const torch::Tensor& x, int64_t sources) {
   return x.unsqueeze(1).expand(expanded).reshape(flat);
 }
 
-std::string ShapeOf(const torch::Tensor& t) {
-  if (!t.defined()) return "undefined";
-  std::string s = "[";
-  for (int64_t d = 0; d < t.dim(); ++d) {
-    if (d > 0) s += ",";
-    s += std::to_string(t.size(d));
-  }
-  return s + "]";
-}
-
 void CheckInput(const DispMvsInput& in, bool needs_depth_range) {
   const auto fail = [](const std::string& what) {
     throw std::invalid_argument("DispMvsNet: " + what);
@@ -132,7 +115,8 @@ void CheckInput(const DispMvsInput& in, bool needs_depth_range) {
   const torch::Tensor& img = in.images;
   if (!img.defined() || img.dim() != 5 || img.size(0) < 1 || img.size(2) != 3 ||
       img.size(3) < 1 || img.size(4) < 1 || !img.is_floating_point()) {
-    fail("images must be a floating-point [B,V,3,H,W] tensor, got " + ShapeOf(img));
+    fail("images must be a floating-point [B,V,3,H,W] tensor, got " +
+         (img.defined() ? c10::str(img.sizes()) : std::string("undefined")));
   }
   const int64_t batch = img.size(0);
   const int64_t views = img.size(1);
@@ -141,12 +125,8 @@ void CheckInput(const DispMvsInput& in, bool needs_depth_range) {
   const auto check = [&](const torch::Tensor& t, const char* name,
                          std::vector<int64_t> expected) {
     if (!t.defined() || t.sizes() != torch::IntArrayRef(expected)) {
-      std::string e = "[";
-      for (size_t i = 0; i < expected.size(); ++i) {
-        if (i) e += ",";
-        e += std::to_string(expected[i]);
-      }
-      fail(std::string(name) + " must be " + e + "], got " + ShapeOf(t));
+      fail(std::string(name) + " must be " + c10::str(torch::IntArrayRef(expected)) + ", got " +
+           (t.defined() ? c10::str(t.sizes()) : std::string("undefined")));
     }
     if (!torch::isfinite(t).all().item<bool>()) fail(std::string(name) + " has non-finite values");
   };
@@ -166,8 +146,9 @@ void CheckInput(const DispMvsInput& in, bool needs_depth_range) {
 RelativePoses ReferenceToSourcePoses(const torch::Tensor& extrinsics) {
   if (!extrinsics.defined() || extrinsics.dim() != 4 || extrinsics.size(1) < 2 ||
       extrinsics.size(2) != 4 || extrinsics.size(3) != 4) {
-    throw std::invalid_argument("ReferenceToSourcePoses: extrinsics must be [B,V,4,4], V >= 2, got " +
-                                ShapeOf(extrinsics));
+    throw std::invalid_argument(
+        "ReferenceToSourcePoses: extrinsics must be [B,V,4,4], V >= 2, got " +
+        (extrinsics.defined() ? c10::str(extrinsics.sizes()) : std::string("undefined")));
   }
   const int64_t n = extrinsics.size(1) - 1;
   // X_s = R_s X_w + T_s and X_w = R_r^T (X_r - T_r).
@@ -180,44 +161,6 @@ RelativePoses ReferenceToSourcePoses(const torch::Tensor& extrinsics) {
   poses.T = T_all.narrow(1, 1, n) - torch::matmul(poses.R, T_ref.unsqueeze(-1)).squeeze(-1);
   return poses;
 }
-
-struct DispMvsNetImpl::StageInput {
-  int64_t batch = 0;
-  int64_t sources = 0;
-  int64_t stride = 0;          // stage resolution = full / stride
-  torch::Tensor ref_features;  // [B,C,h,w]
-  torch::Tensor src_features;  // [B*N,C,h,w]
-  torch::Tensor context;       // [B,hidden+input,h,w], raw encoder output
-  int64_t hidden_channels = 0;
-  int64_t levels = 0;
-  int64_t samples = 0;
-  int64_t iterations = 0;
-  // Per (reference, source) pair, [B*N,...], full-resolution intrinsics.
-  torch::Tensor K_ref, K_src, R, T;
-  // [B,1,h,w], detached, valid everywhere; undefined: start from the best
-  // matches along the segments (needs use_segment_volume).
-  torch::Tensor init_inv_depth;
-  // Model v2: the coarse correlation is the segment volume.
-  bool use_segment_volume = false;
-  // Feature cells at stride * j (StridedIntrinsics), else at the block
-  // centres (ScaleIntrinsics, the paper configuration's convention).
-  bool strided_cells = false;
-  bool keep_every_iteration = false;
-  bool keep_matching = false;  // fill StageResult::matching
-  // Fallback start where no source matched, per sample [B] (undefined: 1).
-  torch::Tensor hint_inv_depth;
-};
-
-struct DispMvsNetImpl::StageResult {
-  struct Iteration {
-    MaskedMap inv_depth;        // fused, [B,1,h,w]
-    torch::Tensor mask_logits;  // [B,9f^2,h,w]; undefined when not kept
-  };
-  std::vector<Iteration> iterations;
-  torch::Tensor state;       // [B,1,h,w] inverse depth carried to the next stage
-  torch::Tensor agreement;   // [B,1,h,w] confidence of the last iteration
-  std::optional<StageMatching> matching;
-};
 
 namespace {
 
@@ -251,6 +194,339 @@ torch::Tensor MatchStart(const EpipolarPair& pair, const SegmentCorrelation& vol
   return torch::where(fused.valid, fused.inv_depth, typical_w.expand_as(fused.inv_depth)).detach();
 }
 
+// What one stage (coarse or fine) runs on.
+struct StageInput {
+  int64_t batch = 0;
+  int64_t sources = 0;
+  int64_t stride = 0;          // stage resolution = full / stride
+  torch::Tensor ref_features;  // [B,C,h,w]
+  torch::Tensor src_features;  // [B*N,C,h,w]
+  torch::Tensor context;       // [B,hidden+input,h,w], raw encoder output
+  int64_t hidden_channels = 0;
+  int64_t levels = 0;
+  int64_t samples = 0;
+  int64_t iterations = 0;
+  // Per (reference, source) pair, [B*N,...], full-resolution intrinsics.
+  torch::Tensor K_ref, K_src, R, T;
+  // [B,1,h,w], detached, valid everywhere; undefined: start from the best
+  // matches along the segments (needs use_segment_volume).
+  torch::Tensor init_inv_depth;
+  // Model v2: the coarse correlation is the segment volume.
+  bool use_segment_volume = false;
+  // Feature cells at stride * j (StridedIntrinsics), else at the block
+  // centres (ScaleIntrinsics, the paper configuration's convention).
+  bool strided_cells = false;
+  bool keep_every_iteration = false;
+  bool keep_matching = false;  // fill StageResult::matching
+  // Fallback start where no source matched, per sample [B] (undefined: 1).
+  torch::Tensor hint_inv_depth;
+};
+
+struct StageResult {
+  struct Iteration {
+    MaskedMap inv_depth;        // fused, [B,1,h,w]
+    torch::Tensor mask_logits;  // [B,9f^2,h,w]; undefined when not kept
+  };
+  std::vector<Iteration> iterations;
+  torch::Tensor state;       // [B,1,h,w] inverse depth carried to the next stage
+  torch::Tensor agreement;   // [B,1,h,w] confidence of the last iteration
+  std::optional<StageMatching> matching;
+};
+
+// What stays fixed over a stage's iterations: the epipolar geometry of every
+// (reference, source) pair and the correlation, one of two kinds.
+struct StageSetup {
+  EpipolarPair pair;
+  EpipolarDirection direction;
+  torch::Tensor ref_features;  // [B*N,C,h,w]: the reference's, once per source
+  // Either the segment volume (v2 coarse) or the 2-D sampler (paper, fine).
+  std::optional<SegmentCorrelation> volume;
+  std::optional<EpipolarCorrelation> correlation;
+};
+
+// Features of all views [B*V,C,h,w] -> the reference's [B,C,h,w] and the
+// sources' [B*N,C,h,w] (index b*N + i, the layout of the pair tensors).
+void SplitViews(const torch::Tensor& features, int64_t b, int64_t v, torch::Tensor& ref,
+                torch::Tensor& src) {
+  const int64_t c = features.size(1), h = features.size(2), w = features.size(3);
+  const torch::Tensor views = features.view({b, v, c, h, w});
+  ref = views.select(1, 0);
+  src = views.narrow(1, 1, v - 1).reshape({b * (v - 1), c, h, w});
+}
+
+// The segment volume's matching distribution, for the matching loss.
+StageMatching SegmentMatching(int64_t stride, const SegmentCorrelation& volume) {
+  return StageMatching{stride,          volume.Logits(),          volume.SampleEflows(),
+                       volume.inside(), volume.segment().base_xy, volume.segment().dir};
+}
+
+// The first lookup window of a local stage (level 0, one stage pixel apart)
+// as a matching distribution, for the matching loss.
+StageMatching WindowMatching(const StageInput& in, const StageSetup& setup,
+                             const CorrelationSamples& cost, const torch::Tensor& base_xy,
+                             const torch::Tensor& eflow) {
+  const torch::Tensor level0 = cost.cost.narrow(1, 0, in.samples);
+  const torch::Tensor inside = cost.inside.narrow(1, 0, in.samples) & setup.direction.valid;
+  const double logit_scale = std::sqrt(static_cast<double>(in.src_features.size(1)));
+  const torch::Tensor offsets =
+      (torch::arange(in.samples, eflow.options()) - 0.5 * static_cast<double>(in.samples - 1))
+          .view({1, in.samples, 1, 1});
+  return StageMatching{in.stride,
+                       torch::where(inside, level0 * logit_scale,
+                                    torch::full_like(level0, kOutsideLogit)),
+                       eflow + offsets, inside, base_xy, setup.direction.dir};
+}
+
+// The stage's epipolar geometry at its resolution, then its correlation:
+// model v2's volume along the whole segments, or the pyramid that the
+// iterations sample around their current match.
+StageSetup SetUpStage(const StageInput& in, StageTimer* timer) {
+  const int64_t h = in.ref_features.size(2), w = in.ref_features.size(3);
+  const double scale = static_cast<double>(in.stride);
+  const auto stage_intrinsics = [&](const torch::Tensor& K) {
+    return in.strided_cells ? StridedIntrinsics(K, scale) : ScaleIntrinsics(K, scale);
+  };
+  StageSetup setup;
+  std::optional<EpipolarSegment> segment;
+  {
+    const StageTimer::Section geometry(timer, NetStage::kGeometry);
+    setup.pair = MakeEpipolarPair(stage_intrinsics(in.K_ref), stage_intrinsics(in.K_src), in.R,
+                                  in.T, h, w);
+    setup.direction = ComputeEpipolarDirection(setup.pair);
+    if (in.use_segment_volume) {
+      segment = ComputeEpipolarSegment(setup.pair, in.src_features.size(2), in.src_features.size(3));
+    }
+  }
+  setup.ref_features = RepeatPerSource(in.ref_features, in.sources);
+  {
+    const StageTimer::Section correlation(timer, NetStage::kCorrelation);
+    if (segment) {
+      setup.volume.emplace(setup.ref_features, in.src_features, *segment, in.levels, in.samples);
+    } else {
+      setup.correlation.emplace(in.src_features, in.levels, in.samples);
+    }
+  }
+  return setup;
+}
+
+// The inverse depth [B,1,h,w] the stage starts from, detached: the given one,
+// else model v2's match start.
+torch::Tensor StartInverseDepth(const StageInput& in, const StageSetup& setup, StageTimer* timer) {
+  if (in.init_inv_depth.defined()) return in.init_inv_depth;
+  if (!setup.volume) throw std::logic_error("DispMvsNet: a match start needs the segment volume");
+  const StageTimer::Section geometry(timer, NetStage::kGeometry);
+  return MatchStart(setup.pair, *setup.volume, in.batch, in.sources, in.hint_inv_depth);
+}
+
+// Every source's E-flow of the fused inverse depth `state`: resetting it from
+// the fused depth each iteration keeps the views consistent (the first
+// iteration gives exactly 0).
+torch::Tensor EflowOf(const StageInput& in, const StageSetup& setup, const torch::Tensor& base_xy,
+                      const torch::Tensor& state, StageTimer* timer) {
+  const StageTimer::Section geometry(timer, NetStage::kGeometry);
+  return SourcePixelToEflow(base_xy, setup.direction.dir,
+                            ProjectInverseDepth(setup.pair, RepeatPerSource(state, in.sources)).xy);
+}
+
+CorrelationSamples LookUpCost(const StageSetup& setup, const torch::Tensor& base_xy,
+                              const torch::Tensor& eflow, StageTimer* timer) {
+  const StageTimer::Section correlation(timer, NetStage::kCorrelation);
+  const torch::Tensor& dir = setup.direction.dir;
+  return setup.volume ? setup.volume->Lookup(EflowToSourcePixel(base_xy, dir, eflow))
+                      : setup.correlation->Lookup(setup.ref_features, base_xy, dir, eflow);
+}
+
+// Every source's match moved by the GRU's step, triangulated, and fused over
+// the sources.
+struct Triangulation {
+  InverseDepth per_source;  // [B*N,1,h,w]
+  FusedInverseDepth fused;  // [B,1,h,w]
+};
+Triangulation TriangulateAndFuse(const StageInput& in, const StageSetup& setup,
+                                 const torch::Tensor& base_xy, const torch::Tensor& eflow,
+                                 const UpdateBlockOutput& update, StageTimer* timer) {
+  const int64_t b = in.batch, n = in.sources;
+  const int64_t h = base_xy.size(2), w = base_xy.size(3);
+  const StageTimer::Section geometry(timer, NetStage::kGeometry);
+  const torch::Tensor src_xy =
+      EflowToSourcePixel(base_xy, setup.direction.dir, eflow + update.delta_eflow);
+  Triangulation out;
+  out.per_source = TriangulateInverseDepth(setup.pair, src_xy);
+  const torch::Tensor pair_valid = out.per_source.valid & setup.direction.valid;
+  out.fused = FuseInverseDepths(out.per_source.inv_depth.view({b, n, h, w}),
+                                update.weight_logit.view({b, n, h, w}), pair_valid.view({b, n, h, w}));
+  return out;
+}
+
+// The confidence output: the fusion weight of the sources that agree with
+// the fused inverse depth `fused_w` [B,1,h,w]. A diagnostic, not trained: no
+// gradient.
+torch::Tensor SourceAgreement(const Triangulation& t, const torch::Tensor& fused_w) {
+  const torch::Tensor per_source = t.per_source.inv_depth.view(t.fused.weights.sizes());
+  const torch::Tensor agrees =
+      (per_source - fused_w).abs() <= DispMvsNetImpl::kAgreementTolerance * fused_w.abs();
+  return (t.fused.weights.detach() * agrees.to(t.fused.weights.scalar_type()))
+      .sum(1, /*keepdim=*/true);
+}
+
+// One stage: `in.iterations` GRU updates of every source's E-flow, each
+// followed by triangulation and fusion (the header's outline).
+StageResult RunStage(const StageInput& in, UpdateBlock& block, StageTimer* timer) {
+  const int64_t b = in.batch, n = in.sources, hid = in.hidden_channels;
+  const int64_t h = in.ref_features.size(2), w = in.ref_features.size(3);
+  if (in.context.size(1) <= hid) {
+    throw std::runtime_error("DispMvsNet: context encoder returned too few channels");
+  }
+  const StageSetup setup = SetUpStage(in, timer);
+
+  // Context: hidden state (tanh) and per-iteration input (relu), one copy per
+  // source pair.
+  torch::Tensor hidden = RepeatPerSource(torch::tanh(in.context.narrow(1, 0, hid)), n);
+  const torch::Tensor context =
+      RepeatPerSource(torch::relu(in.context.narrow(1, hid, in.context.size(1) - hid)), n);
+
+  torch::Tensor state = StartInverseDepth(in, setup, timer);  // [B,1,h,w], detached
+  StageResult result;
+  if (in.keep_matching && setup.volume) result.matching = SegmentMatching(in.stride, *setup.volume);
+  // Base point and direction are fixed for the whole stage; the E-flow is the
+  // offset from the base (docs/method.md, section 4 "E-flow").
+  torch::Tensor base_xy;
+  {
+    const StageTimer::Section geometry(timer, NetStage::kGeometry);
+    base_xy = ProjectInverseDepth(setup.pair, RepeatPerSource(state, n)).xy;
+  }
+
+  for (int64_t t = 0; t < in.iterations; ++t) {
+    const bool last = t + 1 == in.iterations;
+    const torch::Tensor eflow = EflowOf(in, setup, base_xy, state, timer);
+    const CorrelationSamples cost = LookUpCost(setup, base_xy, eflow, timer);
+    if (in.keep_matching && !setup.volume && t == 0) {
+      result.matching = WindowMatching(in, setup, cost, base_xy, eflow);
+    }
+    UpdateBlockOutput update;
+    {
+      const StageTimer::Section gru(timer, NetStage::kUpdate);
+      update = block->forward(hidden, context, cost.cost, eflow);
+    }
+    hidden = update.hidden;
+    const Triangulation triangulation = TriangulateAndFuse(in, setup, base_xy, eflow, update, timer);
+    const FusedInverseDepth& fused = triangulation.fused;
+
+    StageResult::Iteration it;
+    it.inv_depth.valid = fused.valid;
+    it.inv_depth.value =
+        torch::where(fused.valid, fused.inv_depth, torch::zeros_like(fused.inv_depth));
+    if (in.keep_every_iteration || last) {
+      // One mask per reference pixel, from the hidden state averaged over
+      // the sources.
+      const StageTimer::Section mask_head(timer, NetStage::kUpdate);
+      it.mask_logits = block->MaskLogits(hidden.view({b, n, hid, h, w}).mean(1));
+    }
+    if (last) result.agreement = SourceAgreement(triangulation, it.inv_depth.value);
+    result.iterations.push_back(it);
+    // Invalid pixels keep their previous inverse depth; detach as the
+    // release does, so each iteration learns its own step.
+    state = torch::where(fused.valid, fused.inv_depth, state).detach();
+  }
+  result.state = state;
+  return result;
+}
+
+// What both stages share: the batch layout, the cameras of every
+// (reference, source) pair flattened to [B*N,...], and the flags.
+StageInput SharedStageInput(const DispMvsInput& input, bool v2, bool training, StageTimer* timer) {
+  const torch::TensorOptions opts = input.images.options();
+  const int64_t b = input.images.size(0), n = input.images.size(1) - 1;
+  const torch::Tensor K = input.intrinsics.to(opts);
+  RelativePoses poses;
+  {
+    const StageTimer::Section geometry(timer, NetStage::kGeometry);
+    poses = ReferenceToSourcePoses(input.extrinsics.to(opts));
+  }
+  StageInput stage;
+  stage.batch = b;
+  stage.sources = n;
+  stage.K_ref = RepeatPerSource(K.select(1, 0), n);
+  stage.K_src = K.narrow(1, 1, n).reshape({b * n, 3, 3});
+  stage.R = poses.R.reshape({b * n, 3, 3});
+  stage.T = poses.T.reshape({b * n, 3});
+  stage.keep_every_iteration = training;
+  stage.strided_cells = v2;
+  stage.keep_matching = v2 && training;
+  if (input.depth_min.defined()) {
+    // The geometric mean of the hint's ends: used only where no source
+    // matched anywhere in a sample.
+    stage.hint_inv_depth = (input.depth_min.to(opts) * input.depth_max.to(opts)).rsqrt();
+  }
+  return stage;
+}
+
+// What sets a stage apart: its resolution and its sizes in the ModelConfig.
+struct StageSizes {
+  int64_t stride = 0;
+  int64_t hidden_channels = 0;
+  int64_t levels = 0;
+  int64_t samples = 0;
+  int64_t iterations = 0;
+};
+
+// The shared input completed for one stage: the stage's features of all
+// views [B*V,C,h,w] and the reference's raw context.
+StageInput ForStage(const StageInput& shared, const StageSizes& sizes, const torch::Tensor& features,
+                    const torch::Tensor& context) {
+  StageInput stage = shared;
+  stage.stride = sizes.stride;
+  stage.hidden_channels = sizes.hidden_channels;
+  stage.levels = sizes.levels;
+  stage.samples = sizes.samples;
+  stage.iterations = sizes.iterations;
+  SplitViews(features, shared.batch, shared.sources + 1, stage.ref_features, stage.src_features);
+  stage.context = context;
+  return stage;
+}
+
+// The outputs at full resolution (cropped back to height x width) from both
+// stages' iterations: every iteration in training mode (for SequenceLoss),
+// else the last one only.
+DispMvsOutput FullResolutionOutputs(const StageResult& coarse, const StageResult& fine, bool v2,
+                                    bool every_iteration, int64_t height, int64_t width,
+                                    const torch::TensorOptions& opts) {
+  constexpr int64_t f = DispMvsNetImpl::kUpsampleFactor;
+  const auto finish = [&](const MaskedMap& full) {
+    return torch::where(Crop(full.valid, height, width), Crop(full.value, height, width),
+                        torch::zeros({}, opts));
+  };
+  DispMvsOutput out;
+  if (coarse.matching) out.matching.push_back(*coarse.matching);
+  if (fine.matching) out.matching.push_back(*fine.matching);
+  if (every_iteration) {
+    // Coarse maps are two upsamplings away from full resolution: convex to
+    // 1/4, then bilinear (on model v2's strided cells, or block centres).
+    for (const auto& it : coarse.iterations) {
+      const MaskedMap quarter = ConvexUp(it.inv_depth, it.mask_logits, f);
+      out.inv_depths.push_back(finish(v2 ? StridedBilinearUp(quarter, f) : BilinearUp(quarter, f)));
+    }
+    for (size_t i = 0; i + 1 < fine.iterations.size(); ++i) {
+      const auto& it = fine.iterations[i];
+      out.inv_depths.push_back(finish(ConvexUp(it.inv_depth, it.mask_logits, f)));
+    }
+  }
+  const auto& last = fine.iterations.back();
+  const MaskedMap final_map = ConvexUp(last.inv_depth, last.mask_logits, f);
+  out.valid = Crop(final_map.valid, height, width);
+  const torch::Tensor final_inv = finish(final_map);
+  out.inv_depths.push_back(final_inv);
+  out.depth = torch::where(out.valid, 1.0 / torch::where(out.valid, final_inv, torch::ones_like(final_inv)),
+                           torch::zeros_like(final_inv));
+  const MaskedMap confidence = ConvexUp(
+      MaskedMap{torch::where(last.inv_depth.valid, fine.agreement, torch::zeros_like(fine.agreement)),
+                last.inv_depth.valid},
+      last.mask_logits, f);
+  out.confidence = torch::where(out.valid, Crop(confidence.value, height, width).clamp(0.0, 1.0),
+                                torch::zeros_like(final_inv));
+  return out;
+}
+
 }  // namespace
 
 DispMvsNetImpl::DispMvsNetImpl(const ModelConfig& config) : config_(config) {
@@ -269,261 +545,57 @@ DispMvsNetImpl::DispMvsNetImpl(const ModelConfig& config) : config_(config) {
                                  config_.context_input_fine, kUpsampleFactor));
 }
 
-DispMvsNetImpl::StageResult DispMvsNetImpl::RunStage(const StageInput& in, UpdateBlock& block) {
-  const int64_t b = in.batch;
-  const int64_t n = in.sources;
-  const int64_t h = in.ref_features.size(2);
-  const int64_t w = in.ref_features.size(3);
-  const double scale = static_cast<double>(in.stride);
-  if (in.context.size(1) <= in.hidden_channels) {
-    throw std::runtime_error("DispMvsNet: context encoder returned too few channels");
-  }
-
-  StageTimer* const timer = stage_timer_;
-  const auto stage_intrinsics = [&](const torch::Tensor& K) {
-    return in.strided_cells ? StridedIntrinsics(K, scale) : ScaleIntrinsics(K, scale);
-  };
-  const EpipolarPair pair = Timed(timer, NetStage::kGeometry, [&] {
-    return MakeEpipolarPair(stage_intrinsics(in.K_ref), stage_intrinsics(in.K_src), in.R, in.T,
-                            h, w);
-  });
-  const EpipolarDirection direction =
-      Timed(timer, NetStage::kGeometry, [&] { return ComputeEpipolarDirection(pair); });
-  const torch::Tensor ref_features = RepeatPerSource(in.ref_features, n);
-  // Either the segment volume (v2 coarse) or the 2-D sampler (paper, fine).
-  std::optional<SegmentCorrelation> volume;
-  std::optional<EpipolarCorrelation> correlation;
-  if (in.use_segment_volume) {
-    const EpipolarSegment segment = Timed(timer, NetStage::kGeometry, [&] {
-      return ComputeEpipolarSegment(pair, in.src_features.size(2), in.src_features.size(3));
-    });
-    Timed(timer, NetStage::kCorrelation, [&] {
-      volume.emplace(ref_features, in.src_features, segment, in.levels, in.samples);
-    });
-  } else {
-    Timed(timer, NetStage::kCorrelation,
-          [&] { correlation.emplace(in.src_features, in.levels, in.samples); });
-  }
-
-  // Context: hidden state (tanh) and per-iteration input (relu), one copy per
-  // source pair.
-  const int64_t hid = in.hidden_channels;
-  torch::Tensor hidden = RepeatPerSource(torch::tanh(in.context.narrow(1, 0, hid)), n);
-  const torch::Tensor context = RepeatPerSource(
-      torch::relu(in.context.narrow(1, hid, in.context.size(1) - hid)), n);
-
-  // Base point and direction are fixed for the whole stage; the E-flow is the
-  // offset from the base (docs/method.md, section 4 "E-flow").
-  torch::Tensor state = in.init_inv_depth;  // [B,1,h,w], detached
-  if (!state.defined()) {
-    if (!volume) throw std::logic_error("DispMvsNet: a match start needs the segment volume");
-    state = Timed(timer, NetStage::kGeometry,
-                  [&] { return MatchStart(pair, *volume, b, n, in.hint_inv_depth); });
-  }
-  StageResult result;
-  if (in.keep_matching && volume) {
-    result.matching = StageMatching{in.stride,          volume->Logits(),
-                                    volume->SampleEflows(), volume->inside(),
-                                    volume->segment().base_xy, volume->segment().dir};
-  }
-  const torch::Tensor base_xy = Timed(timer, NetStage::kGeometry, [&] {
-    return ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy;
-  });
-
-  for (int64_t t = 0; t < in.iterations; ++t) {
-    const bool last = t + 1 == in.iterations;
-    // Reset every source's E-flow from the fused depth: keeps the views
-    // consistent (the first iteration gives exactly 0).
-    const torch::Tensor eflow = Timed(timer, NetStage::kGeometry, [&] {
-      return SourcePixelToEflow(base_xy, direction.dir,
-                                ProjectInverseDepth(pair, RepeatPerSource(state, n)).xy);
-    });
-    const CorrelationSamples cost = Timed(timer, NetStage::kCorrelation, [&] {
-      return volume ? volume->Lookup(EflowToSourcePixel(base_xy, direction.dir, eflow))
-                    : correlation->Lookup(ref_features, base_xy, direction.dir, eflow);
-    });
-    if (in.keep_matching && !volume && t == 0) {
-      // The first window of a local stage: level 0, one stage pixel apart.
-      const torch::Tensor level0 = cost.cost.narrow(1, 0, in.samples);
-      const torch::Tensor inside = cost.inside.narrow(1, 0, in.samples);
-      const double logit_scale = std::sqrt(static_cast<double>(in.src_features.size(1)));
-      const torch::Tensor offsets =
-          (torch::arange(in.samples, eflow.options()) - 0.5 * static_cast<double>(in.samples - 1))
-              .view({1, in.samples, 1, 1});
-      result.matching = StageMatching{
-          in.stride,
-          torch::where(inside & direction.valid, level0 * logit_scale,
-                       torch::full_like(level0, kOutsideLogit)),
-          eflow + offsets, inside & direction.valid, base_xy, direction.dir};
-    }
-    const UpdateBlockOutput update = Timed(timer, NetStage::kUpdate, [&] {
-      return block->forward(hidden, context, cost.cost, eflow);
-    });
-    hidden = update.hidden;
-
-    const torch::Tensor src_xy = Timed(timer, NetStage::kGeometry, [&] {
-      return EflowToSourcePixel(base_xy, direction.dir, eflow + update.delta_eflow);
-    });
-    const InverseDepth triangulated =
-        Timed(timer, NetStage::kGeometry, [&] { return TriangulateInverseDepth(pair, src_xy); });
-    const torch::Tensor pair_valid = triangulated.valid & direction.valid;
-    const FusedInverseDepth fused = Timed(timer, NetStage::kGeometry, [&] {
-      return FuseInverseDepths(triangulated.inv_depth.view({b, n, h, w}),
-                               update.weight_logit.view({b, n, h, w}),
-                               pair_valid.view({b, n, h, w}));
-    });
-
-    StageResult::Iteration it;
-    it.inv_depth.valid = fused.valid;
-    it.inv_depth.value =
-        torch::where(fused.valid, fused.inv_depth, torch::zeros_like(fused.inv_depth));
-    if (in.keep_every_iteration || last) {
-      // One mask per reference pixel, from the hidden state averaged over
-      // the sources.
-      it.mask_logits = Timed(timer, NetStage::kUpdate, [&] {
-        return block->MaskLogits(hidden.view({b, n, hid, h, w}).mean(1));
-      });
-    }
-    if (last) {
-      const torch::Tensor fused_w = it.inv_depth.value;  // [B,1,h,w]
-      const torch::Tensor per_source = triangulated.inv_depth.view({b, n, h, w});
-      const torch::Tensor agrees =
-          (per_source - fused_w).abs() <= kAgreementTolerance * fused_w.abs();
-      // A diagnostic output, not trained: no gradient.
-      result.agreement = (fused.weights.detach() * agrees.to(fused.weights.scalar_type()))
-                             .sum(1, /*keepdim=*/true);
-    }
-    result.iterations.push_back(it);
-    // Invalid pixels keep their previous inverse depth; detach as the
-    // release does, so each iteration learns its own step.
-    state = torch::where(fused.valid, fused.inv_depth, state).detach();
-  }
-  result.state = state;
-  return result;
-}
-
 DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generator gen) {
   CheckInput(input, config_.NeedsDepthRange());
   const bool v2 = config_.init == ModelConfig::Init::kMatch;
   const torch::TensorOptions opts = input.images.options();
-  const int64_t b = input.images.size(0);
-  const int64_t v = input.images.size(1);
-  const int64_t n = v - 1;
-  const int64_t height = input.images.size(3);
-  const int64_t width = input.images.size(4);
-  const bool has_hint = input.depth_min.defined();
-  const torch::Tensor d_min = has_hint ? input.depth_min.to(opts) : torch::Tensor();
-  const torch::Tensor d_max = has_hint ? input.depth_max.to(opts) : torch::Tensor();
-  const bool keep_every_iteration = is_training();
+  const int64_t b = input.images.size(0), v = input.images.size(1);
+  StageTimer* const timer = stage_timer_;
 
   const torch::Tensor images = PadViews(input.images, kCoarseStride);
-  StageTimer* const timer = stage_timer_;
-  const FeaturePyramid matching =
-      Timed(timer, NetStage::kEncoders, [&] { return matching_encoder_->forward(images); });
-  const FeaturePyramid context = Timed(timer, NetStage::kEncoders, [&] {
-    return context_encoder_->forward(images.view({b, v, 3, images.size(2), images.size(3)}).select(1, 0));
-  });
-  const auto split = [&](const torch::Tensor& f, torch::Tensor& ref, torch::Tensor& src) {
-    const torch::Tensor views = f.view({b, v, f.size(1), f.size(2), f.size(3)});
-    ref = views.select(1, 0);
-    src = views.narrow(1, 1, n).reshape({b * n, f.size(1), f.size(2), f.size(3)});
-  };
-
-  const torch::Tensor K = input.intrinsics.to(opts);
-  const RelativePoses poses = Timed(timer, NetStage::kGeometry, [&] {
-    return ReferenceToSourcePoses(input.extrinsics.to(opts));
-  });
-
-  StageInput stage;
-  stage.batch = b;
-  stage.sources = n;
-  stage.K_ref = RepeatPerSource(K.select(1, 0), n);
-  stage.K_src = K.narrow(1, 1, n).reshape({b * n, 3, 3});
-  stage.R = poses.R.reshape({b * n, 3, 3});
-  stage.T = poses.T.reshape({b * n, 3});
-  stage.keep_every_iteration = keep_every_iteration;
-  stage.strided_cells = v2;
-  stage.keep_matching = v2 && is_training();
-  if (has_hint) {
-    // The geometric mean of the hint's ends: used only where no source
-    // matched anywhere in a sample.
-    stage.hint_inv_depth = (d_min * d_max).rsqrt();
-  }
-
-  // Coarse stage from a random inverse depth.
-  stage.stride = kCoarseStride;
-  split(matching.coarse, stage.ref_features, stage.src_features);
-  stage.context = context.coarse;
-  stage.hidden_channels = config_.hidden_coarse;
-  stage.levels = config_.coarse_levels;
-  stage.samples = config_.coarse_samples;
-  stage.iterations = config_.coarse_iterations;
-  stage.use_segment_volume = v2;
-  if (!v2) {
-    stage.init_inv_depth = Timed(timer, NetStage::kGeometry, [&] {
-      return RandomInverseDepth(d_min, d_max, stage.ref_features.size(2),
-                                stage.ref_features.size(3), gen)
-          .to(opts)
-          .detach();
-    });
-  }
-  const StageResult coarse = RunStage(stage, coarse_block_);
-
-  // Fine stage from the convex-upsampled coarse state.
-  const torch::Tensor coarse_mask = coarse.iterations.back().mask_logits;
-  stage.stride = kFineStride;
-  split(matching.fine, stage.ref_features, stage.src_features);
-  stage.context = context.fine;
-  stage.hidden_channels = config_.hidden_fine;
-  stage.levels = config_.fine_levels;
-  stage.samples = config_.fine_samples;
-  stage.iterations = config_.fine_iterations;
-  stage.use_segment_volume = false;
-  stage.init_inv_depth = Timed(timer, NetStage::kUpsampling, [&] {
-    return ConvexUpsample(coarse.state, coarse_mask, kUpsampleFactor).detach();
-  });
-  const StageResult fine = RunStage(stage, fine_block_);
-
-  // Outputs at full resolution (the upsampling stage of the breakdown: the
-  // remaining work here is a few element-wise selections).
-  DispMvsOutput out;
-  if (coarse.matching) out.matching.push_back(*coarse.matching);
-  if (fine.matching) out.matching.push_back(*fine.matching);
+  FeaturePyramid matching, context;
   {
-    const StageTimer::Section section(timer, NetStage::kUpsampling);
-    const auto finish = [&](const MaskedMap& full) {
-      return torch::where(Crop(full.valid, height, width), Crop(full.value, height, width),
-                          torch::zeros({}, opts));
-    };
-    if (keep_every_iteration) {
-      for (const auto& it : coarse.iterations) {
-        out.inv_depths.push_back(finish(
-            v2 ? StridedBilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor),
-                                   kUpsampleFactor)
-               : BilinearUp(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor),
-                            kUpsampleFactor)));
-      }
-      for (size_t i = 0; i + 1 < fine.iterations.size(); ++i) {
-        const auto& it = fine.iterations[i];
-        out.inv_depths.push_back(finish(ConvexUp(it.inv_depth, it.mask_logits, kUpsampleFactor)));
-      }
-    }
-    const auto& last = fine.iterations.back();
-    const MaskedMap final_map = ConvexUp(last.inv_depth, last.mask_logits, kUpsampleFactor);
-    out.valid = Crop(final_map.valid, height, width);
-    const torch::Tensor final_inv = finish(final_map);
-    out.inv_depths.push_back(final_inv);
-    out.depth = torch::where(out.valid, 1.0 / torch::where(out.valid, final_inv,
-                                                            torch::ones_like(final_inv)),
-                             torch::zeros_like(final_inv));
-    const MaskedMap confidence = ConvexUp(
-        MaskedMap{torch::where(last.inv_depth.valid, fine.agreement, torch::zeros_like(fine.agreement)),
-                  last.inv_depth.valid},
-        last.mask_logits, kUpsampleFactor);
-    out.confidence = torch::where(out.valid, Crop(confidence.value, height, width).clamp(0.0, 1.0),
-                                  torch::zeros_like(final_inv));
+    const StageTimer::Section encoders(timer, NetStage::kEncoders);
+    matching = matching_encoder_->forward(images);
+    context = context_encoder_->forward(
+        images.view({b, v, 3, images.size(2), images.size(3)}).select(1, 0));
   }
-  return out;
+  const StageInput shared = SharedStageInput(input, v2, is_training(), timer);
+
+  // Coarse stage (1/16): model v2 matches along the whole epipolar segments;
+  // the paper's design starts from a random inverse depth inside the hint.
+  StageInput coarse_input =
+      ForStage(shared,
+               {kCoarseStride, config_.hidden_coarse, config_.coarse_levels, config_.coarse_samples,
+                config_.coarse_iterations},
+               matching.coarse, context.coarse);
+  coarse_input.use_segment_volume = v2;
+  if (!v2) {
+    const StageTimer::Section geometry(timer, NetStage::kGeometry);
+    const torch::Tensor d_min = input.depth_min.to(opts), d_max = input.depth_max.to(opts);
+    coarse_input.init_inv_depth =
+        RandomInverseDepth(d_min, d_max, coarse_input.ref_features.size(2),
+                           coarse_input.ref_features.size(3), gen)
+            .to(opts)
+            .detach();
+  }
+  const StageResult coarse = RunStage(coarse_input, coarse_block_, timer);
+
+  // Fine stage (1/4), from the convex-upsampled coarse state.
+  StageInput fine_input = ForStage(shared,
+                                   {kFineStride, config_.hidden_fine, config_.fine_levels,
+                                    config_.fine_samples, config_.fine_iterations},
+                                   matching.fine, context.fine);
+  {
+    const StageTimer::Section upsampling(timer, NetStage::kUpsampling);
+    fine_input.init_inv_depth =
+        ConvexUpsample(coarse.state, coarse.iterations.back().mask_logits, kUpsampleFactor).detach();
+  }
+  const StageResult fine = RunStage(fine_input, fine_block_, timer);
+
+  const StageTimer::Section upsampling(timer, NetStage::kUpsampling);
+  return FullResolutionOutputs(coarse, fine, v2, is_training(), input.images.size(3),
+                               input.images.size(4), opts);
 }
 
 void DispMvsNetImpl::set_iterations(int64_t coarse, int64_t fine) {
@@ -540,10 +612,9 @@ StageMatching DispMvsNetImpl::CoarseMatching(const DispMvsInput& input) {
   const int64_t b = input.images.size(0), v = input.images.size(1), n = v - 1;
   const torch::Tensor images = PadViews(input.images, kCoarseStride);
   const torch::Tensor coarse = matching_encoder_->forward(images).coarse;
-  const int64_t c = coarse.size(1), h = coarse.size(2), w = coarse.size(3);
-  const torch::Tensor views = coarse.view({b, v, c, h, w});
-  const torch::Tensor ref = RepeatPerSource(views.select(1, 0), n);
-  const torch::Tensor src = views.narrow(1, 1, n).reshape({b * n, c, h, w});
+  const int64_t h = coarse.size(2), w = coarse.size(3);
+  torch::Tensor ref, src;
+  SplitViews(coarse, b, v, ref, src);
   const torch::Tensor K = input.intrinsics.to(opts);
   const RelativePoses poses = ReferenceToSourcePoses(input.extrinsics.to(opts));
   const double stride = static_cast<double>(kCoarseStride);
@@ -551,11 +622,9 @@ StageMatching DispMvsNetImpl::CoarseMatching(const DispMvsInput& input) {
       MakeEpipolarPair(StridedIntrinsics(RepeatPerSource(K.select(1, 0), n), stride),
                        StridedIntrinsics(K.narrow(1, 1, n).reshape({b * n, 3, 3}), stride),
                        poses.R.reshape({b * n, 3, 3}), poses.T.reshape({b * n, 3}), h, w);
-  const SegmentCorrelation volume(ref, src, ComputeEpipolarSegment(pair, h, w),
+  const SegmentCorrelation volume(RepeatPerSource(ref, n), src, ComputeEpipolarSegment(pair, h, w),
                                   config_.coarse_levels, config_.coarse_samples);
-  return StageMatching{kCoarseStride,         volume.Logits(),
-                       volume.SampleEflows(), volume.inside(),
-                       volume.segment().base_xy, volume.segment().dir};
+  return SegmentMatching(kCoarseStride, volume);
 }
 
 }  // namespace dispmvs::model

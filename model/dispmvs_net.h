@@ -121,10 +121,6 @@ class DispMvsNetImpl : public torch::nn::Module {
   void set_stage_timer(StageTimer* timer) { stage_timer_ = timer; }
 
  private:
-  struct StageResult;
-  struct StageInput;
-  StageResult RunStage(const StageInput& stage, UpdateBlock& block);
-
   ModelConfig config_;
   MatchingEncoder matching_encoder_{nullptr};
   ContextEncoder context_encoder_{nullptr};

@@ -2,17 +2,10 @@
 
 #include <gtest/gtest.h>
 
-#include <iostream>
 #include <stdexcept>
 
 namespace dispmvs::model {
 namespace {
-
-int64_t ParameterCount(const torch::nn::Module& module) {
-  int64_t count = 0;
-  for (const auto& p : module.parameters()) count += p.numel();
-  return count;
-}
 
 // Every parameter received a non-zero gradient from a random projection of
 // both outputs.
@@ -116,18 +109,6 @@ TEST(EncoderTest, RejectsBadImagesAndConfigs) {
   bad.encoder_base_channels = 0;
   EXPECT_THROW(MatchingEncoder{bad}, std::invalid_argument);
   EXPECT_THROW(ContextEncoder{bad}, std::invalid_argument);
-}
-
-// Not a check: prints the sizes for the record (ctest --verbose).
-TEST(EncoderTest, ReportParameterCounts) {
-  for (const ModelConfig& config : {ModelConfig::Small(), ModelConfig::Paper()}) {
-    const int64_t matching = ParameterCount(*MatchingEncoder(config));
-    const int64_t context = ParameterCount(*ContextEncoder(config));
-    std::cout << "[params] config=" << config.name << " MatchingEncoder=" << matching
-              << " ContextEncoder=" << context << "\n";
-    EXPECT_GT(matching, 0);
-    EXPECT_GT(context, matching);  // wider outputs plus the offset convs
-  }
 }
 
 }  // namespace

@@ -25,9 +25,14 @@
 #include "colmap_io/error.h"
 #include "colmap_io/workspace.h"
 #include "fusion/geometric_filter.h"
-#include "src/dense_passes.h"
-#include "src/dense_plan.h"
-#include "src/depth_estimator.h"
+#include "dense/colmap_export.h"
+#include "dense/fusion_pass.h"
+#include "dense/geometric_pass.h"
+#include "dense/photometric_pass.h"
+#include "dense/plan.h"
+#include "dense/depth_estimator.h"
+#include "src/program_main.h"
+#include "src/program_options.h"
 
 namespace {
 
@@ -246,13 +251,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   // clang-format on
 
   po::variables_map values;
-  po::store(po::parse_command_line(argc, argv, description), values);
-  // --help wins over everything else, including missing required options.
-  if (values.count("help") > 0) {
-    std::cout << description << '\n';
-    return std::nullopt;
-  }
-  po::notify(values);
+  if (!cli::ParseCommandLine(argc, argv, description, &values)) return std::nullopt;
   o.min_num_consistent_given = !values["min_num_consistent"].defaulted();
   if (values.count("workspace_path") == 0) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
@@ -388,15 +387,8 @@ int Run(const Options& options) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
+  return dispmvs::cli::RunProgram([&] {
     const std::optional<Options> options = ParseCommandLine(argc, argv);
-    if (!options) return 0;
-    return Run(*options);
-  } catch (const std::exception& error) {
-    std::cerr << "error: " << error.what() << '\n';
-    return 1;
-  } catch (...) {
-    std::cerr << "error: unknown exception\n";
-    return 1;
-  }
+    return options ? Run(*options) : 0;
+  });
 }

@@ -21,6 +21,8 @@
 
 #include "synth/photo_folder.h"
 #include "synth/workspace_writer.h"
+#include "src/program_main.h"
+#include "src/program_options.h"
 
 namespace {
 
@@ -76,12 +78,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "ground_truth/points.ply keeps every n-th depth sample per row and column.");
 
   po::variables_map values;
-  po::store(po::parse_command_line(argc, argv, description), values);
-  if (values.count("help") > 0) {
-    std::cout << description << '\n';
-    return std::nullopt;
-  }
-  po::notify(values);
+  if (!dispmvs::cli::ParseCommandLine(argc, argv, description, &values)) return std::nullopt;
   if (values.count("output_path") == 0) throw std::invalid_argument("--output_path is required (see --help)");
   if (values.count("num_scenes") == 0) throw std::invalid_argument("--num_scenes is required (see --help)");
   if (options.num_scenes < 1) throw std::invalid_argument("--num_scenes must be >= 1");
@@ -98,7 +95,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
+  return dispmvs::cli::RunProgram([&] {
     const std::optional<Options> options = ParseCommandLine(argc, argv);
     if (!options) return 0;
     const auto start = std::chrono::steady_clock::now();
@@ -107,11 +104,5 @@ int main(int argc, char** argv) {
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::cout << summary.written << " scenes written, " << summary.skipped << " skipped, in " << seconds << " s\n";
     return 0;
-  } catch (const std::exception& error) {
-    std::cerr << "error: " << error.what() << '\n';
-    return 1;
-  } catch (...) {
-    std::cerr << "error: unknown exception\n";
-    return 1;
-  }
+  });
 }

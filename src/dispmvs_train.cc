@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "src/program_main.h"
 #include "train/trainer.h"
 
 namespace {
@@ -223,7 +224,7 @@ void PrintEvaluation(const CommandLine& cl) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  try {
+  return dispmvs::cli::RunProgram([&] {
     const CommandLine cl = Parse(argc, argv);
     if (cl.help) {
       std::cout << kUsage;
@@ -235,8 +236,5 @@ int main(int argc, char** argv) {
       dispmvs::train::Train(cl.options, std::cout);
     }
     return 0;
-  } catch (const std::exception& e) {
-    std::cerr << "error: " << e.what() << "\n";
-    return 1;
-  }
+  });
 }

@@ -6,11 +6,6 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Dense>
-#include <chrono>
-#include <ctime>
-#include <cstdlib>
-#include <fstream>
-#include <iostream>
 #include <memory>
 #include <string>
 #include <tuple>
@@ -266,9 +261,6 @@ TEST(GeneratorTest, RobustDepthRangeIsNearestRankQuantile) {
   EXPECT_EQ(zhi, 0.0);
 }
 
-// Timing (not run by default): ./synth_generator_test --gtest_also_run_disabled_tests
-//   --gtest_filter='*Timing*'. Prints wall time and process CPU time per
-// sample (CPU time is the fairer number on a shared machine).
 // Generation on a device (CUDA where there is one; the CPU instance checks
 // this harness), with photo textures (CPU photos sampled on the device),
 // sensor noise and blur: the cameras are the CPU's exactly, depths and
@@ -310,49 +302,6 @@ TEST_P(GeneratorDeviceTest, SamplesMatchTheCpu) {
 INSTANTIATE_TEST_SUITE_P(DevicesAndRigs, GeneratorDeviceTest,
                          ::testing::Combine(::testing::Values(std::string("cpu"), std::string("cuda")),
                                             ::testing::Range(0, kNumRigKinds)));
-
-TEST(GeneratorTest, DISABLED_Timing) {
-  for (const auto& size : {std::pair<int64_t, int64_t>{256, 320}, {512, 640}}) {
-    SynthConfig config;
-    config.height = size.first;
-    config.width = size.second;
-    config.num_views = 6;
-    GenerateSample(config, 0, torch::kCPU);  // warm-up
-    const int samples = 8;
-    const std::clock_t cpu_start = std::clock();
-    const auto start = std::chrono::steady_clock::now();
-    for (int s = 1; s <= samples; ++s) GenerateSample(config, s, torch::kCPU);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const double cpu_seconds = static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
-    std::cout << config.width << "x" << config.height << " x " << config.num_views << " views, torch threads "
-              << torch::get_num_threads() << ": " << seconds / samples << " s wall, " << cpu_seconds / samples
-              << " s CPU per sample (mean of " << samples << ")\n";
-  }
-}
-
-// Writes a few samples as PPM images for eyeballing when
-// DISPMVS_SYNTH_DUMP_DIR is set; does nothing otherwise.
-TEST(GeneratorTest, DumpForInspection) {
-  const char* dir = std::getenv("DISPMVS_SYNTH_DUMP_DIR");
-  if (dir == nullptr) GTEST_SKIP() << "set DISPMVS_SYNTH_DUMP_DIR to write sample images";
-  SynthConfig config;
-  config.num_views = 3;
-  for (uint64_t seed = 0; seed < 8; ++seed) {
-    const SynthSample s = GenerateSample(config, seed, torch::kCPU);
-    for (int v = 0; v < config.num_views; ++v) {
-      const torch::Tensor rgb =
-          (s.images[v] * 255).round().to(torch::kUInt8).permute({1, 2, 0}).contiguous();
-      const torch::Tensor inv = s.depths[v][0].reciprocal().nan_to_num(0, 0, 0);
-      const torch::Tensor grey = (inv / inv.max() * 255).round().to(torch::kUInt8).contiguous();
-      const std::string stem = std::string(dir) + "/" + std::to_string(seed) + "_" + s.rig + "_" + std::to_string(v);
-      std::ofstream image(stem + ".ppm", std::ios::binary), disparity(stem + "_invdepth.pgm", std::ios::binary);
-      image << "P6\n" << config.width << " " << config.height << "\n255\n";
-      image.write(reinterpret_cast<const char*>(rgb.data_ptr<uint8_t>()), rgb.numel());
-      disparity << "P5\n" << config.width << " " << config.height << "\n255\n";
-      disparity.write(reinterpret_cast<const char*>(grey.data_ptr<uint8_t>()), grey.numel());
-    }
-  }
-}
 
 }  // namespace
 }  // namespace dispmvs::synth

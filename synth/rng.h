@@ -11,15 +11,26 @@
 
 namespace dispmvs::synth {
 
+// One SplitMix64 step as a hash: x plus the golden-ratio increment, then the
+// finaliser. Well mixed and identical on every platform (unlike std::hash),
+// so seeds derived with it (scenes, training samples, textures) name the
+// same thing everywhere.
+constexpr uint64_t SplitMix64(uint64_t x) {
+  x += 0x9E3779B97F4A7C15ull;
+  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
+  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
 class Rng {
  public:
   explicit Rng(uint64_t seed) : state_(seed) {}
 
+  // The stream is SplitMix64 of seed, seed + increment, seed + 2 increments...
   uint64_t NextU64() {
-    uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
+    const uint64_t z = SplitMix64(state_);
+    state_ += 0x9E3779B97F4A7C15ull;
+    return z;
   }
   // Uniform in [0, 1) with 53 random bits.
   double Uniform() { return static_cast<double>(NextU64() >> 11) * 0x1.0p-53; }

@@ -18,12 +18,14 @@
 #include <type_traits>
 
 #include "model/config.h"
+#include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/loss.h"
 #include "model/matching_loss.h"
 #include "model/safetensors.h"
 #include "synth/generator.h"
 #include "synth/photo_folder.h"
+#include "synth/rng.h"
 #include "train/batch.h"
 #include "train/mvsnet_dataset.h"
 
@@ -40,14 +42,8 @@ constexpr uint64_t kTopBit = uint64_t{1} << 63;
 // sequence, so the replacement is deterministic too.
 constexpr int kMaxDrawAttempts = 16;
 
-uint64_t SplitMix64(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
-
-uint64_t Mix(uint64_t a, uint64_t b) { return SplitMix64(a ^ SplitMix64(b)); }
+// Two seeds into one (SplitMix64: the same on every platform).
+uint64_t Mix(uint64_t a, uint64_t b) { return synth::SplitMix64(a ^ synth::SplitMix64(b)); }
 
 // Seed of the network's random initialisation at training step `step`.
 uint64_t TrainingInitSeed(uint64_t seed, int64_t step) {
@@ -56,19 +52,6 @@ uint64_t TrainingInitSeed(uint64_t seed, int64_t step) {
 
 torch::Generator CpuGenerator(uint64_t seed) {
   return at::make_generator<at::CPUGeneratorImpl>(seed);
-}
-
-torch::Device ParseDevice(const std::string& text) {
-  std::unique_ptr<torch::Device> device;
-  try {
-    device = std::make_unique<torch::Device>(text);
-  } catch (const std::exception&) {
-    throw std::invalid_argument("device must be cpu, cuda or cuda:<index>, got '" + text + "'");
-  }
-  if (!device->is_cpu() && !device->is_cuda()) {
-    throw std::invalid_argument("device must be cpu, cuda or cuda:<index>, got '" + text + "'");
-  }
-  return *device;
 }
 
 ModelConfig ModelConfigByName(const std::string& name) {
@@ -476,8 +459,8 @@ std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vec
 
 // Depth metrics on the validation scenes with the hint widened by
 // `widening` (0: no hint), with the network's iterations as they are.
-DepthMetrics ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
-                           const TrainOptions& options, double widening) {
+ValidationDepthMetrics ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                                     const TrainOptions& options, double widening) {
   if (widening == 0 && net->config().NeedsDepthRange()) {
     throw std::invalid_argument("weights of config '" + net->config().name +
                                 "' need a depth-range hint: no 'none' row for them");
@@ -485,16 +468,16 @@ DepthMetrics ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample
   const bool was_training = net->is_training();
   net->eval();
   torch::NoGradGuard no_grad;
-  DepthMetricSums sums;
+  ValidationDepthSums sums;
   for (size_t i = 0; i < scenes.size(); ++i) {
     const auto batch = MakeBatch({scenes[i]}, widening);
     // Same initialisation for a scene at every evaluation: the numbers differ
     // between evaluations only because the weights do.
     const auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
-    sums += SumDepthMetrics(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
+    sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
   }
   net->train(was_training);
-  return Finalize(sums);
+  return FinalizeValidation(sums);
 }
 
 // One table row per widening; the coarse accuracy measured once for all.
@@ -538,7 +521,7 @@ void TrainOptions::Check(bool for_training) const {
   if (!(std::isfinite(train_widening_max) && train_widening_max >= 1 && train_widening_max <= 1000)) {
     fail("train_widening_max must be in [1, 1000], got " + std::to_string(train_widening_max));
   }
-  ParseDevice(device);
+  model::ParseDevice(device);  // usable or not: checked when training starts
   if (threads < 0 || threads > 1024) fail("threads must be in [0, 1024], got " + std::to_string(threads));
   if (checkpoint_every < 1) fail("checkpoint_every must be >= 1, got " + std::to_string(checkpoint_every));
   if (validate_every < 0) fail("validate_every must be >= 0, got " + std::to_string(validate_every));
@@ -622,19 +605,171 @@ std::string FormatMatching(const WideningResult& r) {
   return buffer;
 }
 
-std::string FormatMetrics(const DepthMetrics& m) {
+std::string FormatMetrics(const ValidationDepthMetrics& m) {
   char buffer[160];
   std::snprintf(buffer, sizeof buffer, "<1%%: %.4f  <2%%: %.4f  <5%%: %.4f  AbsRel: %.4f  coverage: %.4f",
                 m.within_1, m.within_2, m.within_5, m.abs_rel, m.coverage);
   return buffer;
 }
 
+namespace {
+
+// The weights and Adam moments a run starts from: its last complete
+// checkpoint, else --init_weights, else the seeded random ones already in
+// `net`. Returns the first step to run.
+int64_t RestoreRun(const TrainOptions& options, const fs::path& dir, const Settings& settings,
+                   DispMvsNet& net, torch::optim::Adam& optimizer, torch::Device device, Logger& log) {
+  const auto checkpoints = CompleteCheckpoints(dir);
+  if (!checkpoints.empty()) {
+    const int64_t start = checkpoints.back();
+    LoadCheckpoint(dir, start, net, optimizer, settings, device);
+    log.Line("resumed from " + WeightsPath(dir, start).string() + " at step " + std::to_string(start));
+    return start;
+  }
+  if (!options.init_weights.empty()) {
+    // Checked before anything is trained: a mismatch names the tensor.
+    model::LoadModuleWeights(*net, options.init_weights);
+    log.Line("initialised from " + options.init_weights + " (" + settings.at("init_weights") + ")");
+  }
+  return 0;
+}
+
+// Where the training samples come from: generated scenes (with photo
+// textures when the run has a photo folder) and the MVSNet data set, if any.
+// Each generated scene serves options.scene_reuse consecutive steps.
+class TrainingSamples {
+ public:
+  TrainingSamples(const TrainOptions& options, torch::Device device, Logger& log)
+      : options_(options), device_(device), synth_config_(SynthConfigFor(options)) {
+    if (!options.texture_dir.empty()) {
+      std::ostringstream warnings;
+      synth_config_.photos = std::make_shared<const synth::PhotoSet>(
+          synth::LoadPhotoFolder(options.texture_dir, {}, &warnings));
+      synth_config_.photo_probability = options.photo_probability;
+      std::istringstream lines(warnings.str());
+      for (std::string line; std::getline(lines, line);) log.Line(line);
+      log.Line("photo textures: " + std::to_string(synth_config_.photos->size()) + " photos from " +
+               options.texture_dir + ", probability " + std::to_string(options.photo_probability));
+    }
+    mvsnet_ = OpenMvsnetSource(options, synth_config_);
+    if (mvsnet_) {
+      log.Line("MVSNet data set " + options.mvsnet_root + ": " +
+               std::to_string(mvsnet_->dataset.scans.size()) + " scans, " +
+               std::to_string(mvsnet_->views.size()) + " reference views with ground truth, fraction " +
+               std::to_string(options.mvsnet_fraction));
+    }
+  }
+
+  // The batch's samples of training step `step`: the scenes of its group,
+  // each with the step's view as the reference.
+  std::vector<synth::SynthSample> ForStep(int64_t step) {
+    const int64_t group = step / options_.scene_reuse;
+    if (group != cached_group_) {
+      synth_config_.difficulty = TrainingDifficultyAt(options_, group * options_.scene_reuse);
+      cached_scenes_.clear();
+      for (int64_t j = 0; j < options_.batch_size; ++j) {
+        cached_scenes_.push_back(TrainingSample(options_, synth_config_, mvsnet_, group, j, device_));
+      }
+      cached_group_ = group;
+    }
+    std::vector<synth::SynthSample> samples;
+    for (const auto& scene : cached_scenes_) {
+      samples.push_back(WithReference(scene, step % options_.scene_reuse));
+    }
+    return samples;
+  }
+
+ private:
+  const TrainOptions& options_;
+  torch::Device device_;
+  synth::SynthConfig synth_config_;
+  std::optional<MvsnetSource> mvsnet_;
+  int64_t cached_group_ = -1;
+  std::vector<synth::SynthSample> cached_scenes_;
+};
+
+// The loss of one training step and what the log reports of it.
+struct StepLoss {
+  torch::Tensor loss;        // what is minimised
+  torch::Tensor depth_loss;  // the sequence loss
+  double match_loss = 0;     // the matching loss (model v2), 0 without one
+  double top1 = 0;           // coarse matches whose arg-max is right, of `counted`
+  double counted = 0;
+};
+
+StepLoss ComputeStepLoss(const TrainOptions& options, const model::DispMvsOutput& output,
+                         const TrainingBatch& batch, double widening, bool matching_loss, int64_t step) {
+  StepLoss result;
+  // Normalised by the unwidened range (see TrainOptions::train_widening_max).
+  result.depth_loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
+                                          batch.input.depth_min * widening, batch.input.depth_max / widening);
+  result.loss = result.depth_loss;
+  if (!matching_loss) return result;
+  torch::Tensor match_loss = torch::zeros({}, result.depth_loss.options());
+  for (const auto& stage : output.matching) {
+    const auto truth = model::ComputeGroundTruthMatches(batch.gt_depths, batch.input.intrinsics,
+                                                        batch.input.extrinsics, stage.stride,
+                                                        stage.logits.size(2), stage.logits.size(3));
+    const auto stage_result = model::MatchingLoss(stage, truth);
+    match_loss = match_loss + stage_result.loss;
+    if (stage.stride == model::DispMvsNetImpl::kCoarseStride) {
+      result.top1 = stage_result.top1;
+      result.counted = stage_result.count;
+    }
+  }
+  result.match_loss = match_loss.item<double>();
+  const bool warmup = step < options.matching_warmup_steps;
+  // During the warm-up the depth loss enters with weight 0: every
+  // parameter still receives a (zero) gradient, so Adam steps them all
+  // alike and the checkpoint's single step count stays true.
+  result.loss = warmup ? match_loss + 0.0 * result.depth_loss
+                       : result.depth_loss + options.matching_loss_weight * match_loss;
+  return result;
+}
+
+double SecondsSince(std::chrono::steady_clock::time_point t) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
+}
+
+// Where a step's wall time went.
+struct StepTimes {
+  double total = 0, scenes = 0, forward = 0, backward = 0, cpu = 0;
+};
+
+std::string StepLine(const TrainOptions& options, int64_t step, const StepLoss& loss, double lr,
+                     const StepTimes& times, double eta_seconds) {
+  char line[384];
+  std::snprintf(line, sizeof line,
+                "step %lld/%lld  loss %.5f  depth %.5f  match %.4f  top1 %.3f  lr %.3e  %.2f s/step "
+                "(scenes %.2f, forward %.2f, backward %.2f; cpu %.2f s)  ETA %s",
+                static_cast<long long>(step + 1), static_cast<long long>(options.steps),
+                loss.loss.item<double>(), loss.depth_loss.item<double>(), loss.match_loss,
+                loss.counted > 0 ? loss.top1 / loss.counted : 0.0, lr, times.total, times.scenes,
+                times.forward, times.backward, times.cpu, FormatDuration(eta_seconds).c_str());
+  return line;
+}
+
+// Validation runs the iterations the weights are saved with, then training
+// goes on with its own.
+void ValidateAndLog(DispMvsNet& net, const ModelConfig& config, const std::vector<synth::SynthSample>& scenes,
+                    const TrainOptions& options, int64_t step, double cpu_start, Logger& log) {
+  if (scenes.empty()) return;
+  net->set_iterations(config.coarse_iterations, config.fine_iterations);
+  const WideningResult result = Validate(net, scenes, options, {1.0}).front();
+  if (options.train_coarse_iterations > 0) {
+    net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
+  }
+  char cpu[64];
+  std::snprintf(cpu, sizeof cpu, "  cpu %.0f s", CpuSeconds() - cpu_start);
+  log.Line("validate step " + std::to_string(step) + cpu + "  x=1  " + FormatMetrics(result.metrics) +
+           "  " + FormatMatching(result));
+}
+
+}  // namespace
+
 void Train(const TrainOptions& options, std::ostream& console) {
   options.Check(/*for_training=*/true);
-  const torch::Device device = ParseDevice(options.device);
-  if (device.is_cuda() && !torch::cuda::is_available()) {
-    throw std::invalid_argument("device " + options.device + ": CUDA is not available");
-  }
+  const torch::Device device = model::ParseUsableDevice(options.device);
   SetThreads(options.threads);
   const fs::path dir = options.checkpoint_dir;
   fs::create_directories(dir);
@@ -645,152 +780,59 @@ void Train(const TrainOptions& options, std::ostream& console) {
   DispMvsNet net(config);
   net->to(device);
   torch::optim::Adam optimizer(net->parameters(), torch::optim::AdamOptions(options.lr));
-
   const Settings settings = RunSettings(options);
-  int64_t start = 0;
-  const auto checkpoints = CompleteCheckpoints(dir);
-  if (!checkpoints.empty()) {
-    start = checkpoints.back();
-    LoadCheckpoint(dir, start, net, optimizer, settings, device);
-    log.Line("resumed from " + WeightsPath(dir, start).string() + " at step " + std::to_string(start));
-  } else if (!options.init_weights.empty()) {
-    // Checked before anything is trained: a mismatch names the tensor.
-    model::LoadModuleWeights(*net, options.init_weights);
-    log.Line("initialised from " + options.init_weights + " (" +
-             settings.at("init_weights") + ")");
-  }
+  const int64_t start = RestoreRun(options, dir, settings, net, optimizer, device, log);
 
-  auto synth_config = SynthConfigFor(options);  // of the training samples
-  if (!options.texture_dir.empty()) {
-    std::ostringstream warnings;
-    synth_config.photos = std::make_shared<const synth::PhotoSet>(
-        synth::LoadPhotoFolder(options.texture_dir, {}, &warnings));
-    synth_config.photo_probability = options.photo_probability;
-    std::istringstream lines(warnings.str());
-    for (std::string line; std::getline(lines, line);) log.Line(line);
-    log.Line("photo textures: " + std::to_string(synth_config.photos->size()) + " photos from " +
-             options.texture_dir + ", probability " + std::to_string(options.photo_probability));
-  }
-  const auto mvsnet = OpenMvsnetSource(options, synth_config);
-  if (mvsnet) {
-    log.Line("MVSNet data set " + options.mvsnet_root + ": " + std::to_string(mvsnet->dataset.scans.size()) +
-             " scans, " + std::to_string(mvsnet->views.size()) + " reference views with ground truth, fraction " +
-             std::to_string(options.mvsnet_fraction));
-  }
+  TrainingSamples training_samples(options, device, log);
   const auto validation_scenes = ValidationScenes(options, device);
   const double cpu_start = CpuSeconds();
-  auto validate = [&](int64_t step) {
-    if (validation_scenes.empty()) return;
-    // Validation runs the iterations the weights are saved with.
-    net->set_iterations(config.coarse_iterations, config.fine_iterations);
-    const WideningResult result = Validate(net, validation_scenes, options, {1.0}).front();
-    if (options.train_coarse_iterations > 0) {
-      net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
-    }
-    char cpu[64];
-    std::snprintf(cpu, sizeof cpu, "  cpu %.0f s", CpuSeconds() - cpu_start);
-    log.Line("validate step " + std::to_string(step) + cpu + "  x=1  " + FormatMetrics(result.metrics) +
-             "  " + FormatMatching(result));
-  };
-
-  const bool v2 = !config.NeedsDepthRange();
-  const bool matching_loss = v2 && options.matching_loss_weight > 0;
+  const bool matching_loss = !config.NeedsDepthRange() && options.matching_loss_weight > 0;
   if (options.train_coarse_iterations > 0) {
     net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
   }
   net->train();
   const auto run_start = std::chrono::steady_clock::now();
-  const auto seconds_since = [](std::chrono::steady_clock::time_point t) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-  };
   int64_t last_validated = -1;
   int64_t final_step = std::max(start, options.steps);
-  // The generated scenes of the current scene group (scene_reuse).
-  int64_t cached_group = -1;
-  std::vector<synth::SynthSample> cached_scenes;
   for (int64_t step = start; step < options.steps; ++step) {
     const auto step_start = std::chrono::steady_clock::now();
     const double step_cpu_start = CpuSeconds();
+    StepTimes times;
     const double lr = LearningRateAt(options, step);
     for (auto& group : optimizer.param_groups()) {
       static_cast<torch::optim::AdamOptions&>(group.options()).lr(lr);
     }
-
-    const int64_t group = step / options.scene_reuse;
-    if (group != cached_group) {
-      synth_config.difficulty = TrainingDifficultyAt(options, group * options.scene_reuse);
-      cached_scenes.clear();
-      for (int64_t j = 0; j < options.batch_size; ++j) {
-        cached_scenes.push_back(TrainingSample(options, synth_config, mvsnet, group, j, device));
-      }
-      cached_group = group;
-    }
-    std::vector<synth::SynthSample> samples;
-    for (const auto& scene : cached_scenes) samples.push_back(WithReference(scene, step % options.scene_reuse));
     const double widening = TrainingWideningAt(options, step);
-    const auto batch = MakeBatch(samples, widening);
-    const double generate_seconds = seconds_since(step_start);
+    const auto batch = MakeBatch(training_samples.ForStep(step), widening);
+    times.scenes = SecondsSince(step_start);
 
     const auto forward_start = std::chrono::steady_clock::now();
     const auto output = net->forward(batch.input, CpuGenerator(TrainingInitSeed(options.seed, step)));
-    // Normalised by the unwidened range (see TrainOptions::train_widening_max).
-    const auto depth_loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
-                                                batch.input.depth_min * widening, batch.input.depth_max / widening);
-    torch::Tensor loss = depth_loss;
-    double match_loss_value = 0, top1 = 0, counted = 0;
-    if (matching_loss) {
-      torch::Tensor match_loss = torch::zeros({}, depth_loss.options());
-      for (const auto& stage : output.matching) {
-        const auto truth = model::ComputeGroundTruthMatches(batch.gt_depths, batch.input.intrinsics,
-                                                            batch.input.extrinsics, stage.stride,
-                                                            stage.logits.size(2), stage.logits.size(3));
-        const auto result = model::MatchingLoss(stage, truth);
-        match_loss = match_loss + result.loss;
-        if (stage.stride == model::DispMvsNetImpl::kCoarseStride) {
-          top1 = result.top1;
-          counted = result.count;
-        }
-      }
-      match_loss_value = match_loss.item<double>();
-      const bool warmup = step < options.matching_warmup_steps;
-      // During the warm-up the depth loss enters with weight 0: every
-      // parameter still receives a (zero) gradient, so Adam steps them all
-      // alike and the checkpoint's single step count stays true.
-      loss = warmup ? match_loss + 0.0 * depth_loss
-                    : depth_loss + options.matching_loss_weight * match_loss;
-    }
-    const double forward_seconds = seconds_since(forward_start);
+    const StepLoss loss = ComputeStepLoss(options, output, batch, widening, matching_loss, step);
+    times.forward = SecondsSince(forward_start);
 
     const auto backward_start = std::chrono::steady_clock::now();
     optimizer.zero_grad();
-    loss.backward();
+    loss.loss.backward();
     if (options.grad_clip > 0) torch::nn::utils::clip_grad_norm_(net->parameters(), options.grad_clip);
     optimizer.step();
-    const double backward_seconds = seconds_since(backward_start);
+    times.backward = SecondsSince(backward_start);
 
-    const double step_seconds = seconds_since(step_start);
-    const double mean_seconds = seconds_since(run_start) / static_cast<double>(step + 1 - start);
-    char line[384];
-    std::snprintf(line, sizeof line,
-                  "step %lld/%lld  loss %.5f  depth %.5f  match %.4f  top1 %.3f  lr %.3e  %.2f s/step "
-                  "(scenes %.2f, forward %.2f, backward %.2f; cpu %.2f s)  ETA %s",
-                  static_cast<long long>(step + 1), static_cast<long long>(options.steps),
-                  loss.item<double>(), depth_loss.item<double>(), match_loss_value,
-                  counted > 0 ? top1 / counted : 0.0, lr, step_seconds, generate_seconds,
-                  forward_seconds, backward_seconds, CpuSeconds() - step_cpu_start,
-                  FormatDuration(mean_seconds * static_cast<double>(options.steps - step - 1)).c_str());
-    log.Line(line);
+    times.total = SecondsSince(step_start);
+    times.cpu = CpuSeconds() - step_cpu_start;
+    const double mean_seconds = SecondsSince(run_start) / static_cast<double>(step + 1 - start);
+    log.Line(StepLine(options, step, loss, lr, times, mean_seconds * static_cast<double>(options.steps - step - 1)));
 
     const int64_t done = step + 1;
     const bool out_of_cpu_time =
         options.max_cpu_minutes > 0 && CpuSeconds() - cpu_start >= 60.0 * options.max_cpu_minutes;
-    const bool out_of_wall_time = options.max_minutes > 0 && seconds_since(run_start) >= 60.0 * options.max_minutes;
+    const bool out_of_wall_time = options.max_minutes > 0 && SecondsSince(run_start) >= 60.0 * options.max_minutes;
     const bool out_of_time = out_of_cpu_time || out_of_wall_time;
     if (done % options.checkpoint_every == 0 || done == options.steps || out_of_time) {
       SaveCheckpoint(dir, done, net, config, optimizer, settings);
     }
     if (options.validate_every > 0 && done % options.validate_every == 0) {
-      validate(done);
+      ValidateAndLog(net, config, validation_scenes, options, done, cpu_start, log);
       last_validated = done;
     }
     if (out_of_time) {
@@ -800,7 +842,9 @@ void Train(const TrainOptions& options, std::ostream& console) {
       break;
     }
   }
-  if (last_validated != final_step) validate(final_step);
+  if (last_validated != final_step) {
+    ValidateAndLog(net, config, validation_scenes, options, final_step, cpu_start, log);
+  }
   model::SaveModuleWeights(*net, config, (dir / "model.safetensors").string());
   log.Line("wrote " + (dir / "model.safetensors").string());
 }
@@ -808,10 +852,7 @@ void Train(const TrainOptions& options, std::ostream& console) {
 std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, const TrainOptions& options,
                                             const std::vector<double>& widenings) {
   options.Check(/*for_training=*/false);
-  const torch::Device device = ParseDevice(options.device);
-  if (device.is_cuda() && !torch::cuda::is_available()) {
-    throw std::invalid_argument("device " + options.device + ": CUDA is not available");
-  }
+  const torch::Device device = model::ParseUsableDevice(options.device);
   if (options.num_validation_scenes < 1) throw std::invalid_argument("num_validation_scenes must be >= 1");
   SetThreads(options.threads);
   DispMvsNet net(model::ReadModelConfig(weights_path));

@@ -24,7 +24,7 @@
 
 #include <torch/torch.h>
 
-#include "train/depth_metrics.h"
+#include "train/validation_metrics.h"
 
 namespace dispmvs::train {
 
@@ -136,7 +136,7 @@ void Train(const TrainOptions& options, std::ostream& log);
 
 struct WideningResult {
   double widening = 1;  // x: depth range hint (d_min / x, d_max * x); 0 = no hint
-  DepthMetrics metrics;
+  ValidationDepthMetrics metrics;
   // Coarse matching: share of ground-truth matches whose arg-max along the
   // segment volume is within one 1/16 pixel (pairs counted: matching_count).
   double coarse_top1 = 0;
@@ -152,7 +152,7 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path,
                                             const std::vector<double>& widenings);
 
 // One line per result: "x=2  <1%: 0.123  <2%: ...  AbsRel: ...  coverage: ...".
-std::string FormatMetrics(const DepthMetrics& metrics);
+std::string FormatMetrics(const ValidationDepthMetrics& metrics);
 // "coarse top-1: 0.4321".
 std::string FormatMatching(const WideningResult& result);
 

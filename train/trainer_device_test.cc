@@ -9,7 +9,6 @@
 
 #include <cmath>
 #include <filesystem>
-#include <regex>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -23,6 +22,7 @@
 #include "model/dispmvs_net.h"
 #include "model/safetensors.h"
 #include "tests/support/temp_dir.h"
+#include "train/step_log_test_util.h"
 #include "train/trainer.h"
 
 namespace dispmvs::train {
@@ -50,17 +50,6 @@ TrainOptions DeviceOptions(const fs::path& dir, const std::string& config, const
   o.scene_reuse = 2;
   if (config == "small_v2") o.matching_warmup_steps = 1;
   return o;
-}
-
-// The loss of the first step in a training log.
-double FirstStepLoss(const std::string& log) {
-  std::smatch match;
-  const std::regex pattern(R"(step 1/\d+  loss ([-+0-9.eE]+|nan|inf))");
-  if (!std::regex_search(log, match, pattern)) {
-    ADD_FAILURE() << "no first step in the log:\n" << log;
-    return std::nan("");
-  }
-  return std::stod(match[1].str());
 }
 
 class TrainerDeviceTest : public ::testing::TestWithParam<std::tuple<std::string, std::string>> {};
@@ -111,8 +100,8 @@ TEST_P(TrainerDeviceTest, TrainResumeValidateAndEvaluate) {
   // near-ties may break the other way.
   std::ostringstream cpu_log;
   Train(DeviceOptions(tmp.path() / "cpu", config, "cpu", 1), cpu_log);
-  const double expected = FirstStepLoss(cpu_log.str());
-  EXPECT_NEAR(FirstStepLoss(first.str()), expected, 0.1 * std::abs(expected));
+  const double expected = LoggedStepLosses(cpu_log.str()).loss;
+  EXPECT_NEAR(LoggedStepLosses(first.str()).loss, expected, 0.1 * std::abs(expected));
   evaluation.device = "cpu";
   const std::vector<WideningResult> cpu_rows = EvaluateWeights(weights, evaluation, widenings);
   for (size_t i = 0; i < rows.size(); ++i) {

@@ -1,11 +1,11 @@
-#include "train/depth_metrics.h"
+#include "train/validation_metrics.h"
 
 #include <stdexcept>
 #include <string>
 
 namespace dispmvs::train {
 
-DepthMetricSums& DepthMetricSums::operator+=(const DepthMetricSums& other) {
+ValidationDepthSums& ValidationDepthSums::operator+=(const ValidationDepthSums& other) {
   gt_pixels += other.gt_pixels;
   covered += other.covered;
   within_1 += other.within_1;
@@ -27,8 +27,8 @@ void CheckSameShape(const torch::Tensor& t, const torch::Tensor& reference, cons
 
 }  // namespace
 
-DepthMetricSums SumDepthMetrics(const torch::Tensor& pred_depth, const torch::Tensor& pred_valid,
-                                const torch::Tensor& gt_depth, const torch::Tensor& gt_valid) {
+ValidationDepthSums SumValidationDepth(const torch::Tensor& pred_depth, const torch::Tensor& pred_valid,
+                                       const torch::Tensor& gt_depth, const torch::Tensor& gt_valid) {
   if (!gt_depth.defined() || gt_depth.dim() != 4 || gt_depth.size(1) != 1) {
     throw std::invalid_argument("depth metrics: gt_depth must be [B,1,H,W]");
   }
@@ -48,7 +48,7 @@ DepthMetricSums SumDepthMetrics(const torch::Tensor& pred_depth, const torch::Te
   const auto safe_gt = torch::where(has_gt, gt, torch::ones_like(gt));
   const auto rel = torch::where(has_pred, (pred - gt).abs() / safe_gt, torch::ones_like(gt));
 
-  DepthMetricSums sums;
+  ValidationDepthSums sums;
   sums.gt_pixels = has_gt.sum().item<int64_t>();
   sums.covered = has_pred.sum().item<int64_t>();
   sums.within_1 = (has_pred & (rel < 0.01)).sum().item<int64_t>();
@@ -58,8 +58,8 @@ DepthMetricSums SumDepthMetrics(const torch::Tensor& pred_depth, const torch::Te
   return sums;
 }
 
-DepthMetrics Finalize(const DepthMetricSums& sums) {
-  DepthMetrics m;
+ValidationDepthMetrics FinalizeValidation(const ValidationDepthSums& sums) {
+  ValidationDepthMetrics m;
   m.gt_pixels = sums.gt_pixels;
   if (sums.gt_pixels == 0) return m;
   const double n = static_cast<double>(sums.gt_pixels);

@@ -2,7 +2,7 @@
 // sources count (only those that get a depth map), when the default is
 // lowered per reference, when a value the user gave is refused.
 
-#include "src/dense_plan.h"
+#include "dense/plan.h"
 
 #include <map>
 #include <stdexcept>

@@ -1,4 +1,4 @@
-#include "src/dense_plan.h"
+#include "dense/plan.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "src/depth_estimator.h"
+#include "dense/depth_estimator.h"
 
 #include <algorithm>
 #include <cmath>
@@ -8,35 +8,13 @@
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
 
+#include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/safetensors.h"
 
 namespace dispmvs::dense {
 
 namespace {
-
-torch::Device ParseDevice(const std::string& text) {
-  const std::string message = "--device must be cpu, cuda or cuda:<index>, got '" + text + "'";
-  std::unique_ptr<torch::Device> device;
-  try {
-    device = std::make_unique<torch::Device>(text);
-  } catch (const std::exception&) {
-    throw std::invalid_argument(message);
-  }
-  if (!device->is_cpu() && !device->is_cuda()) throw std::invalid_argument(message);
-  if (device->is_cuda()) {
-    if (!torch::cuda::is_available()) {
-      throw std::invalid_argument("--device " + text +
-                                  ": this LibTorch has no CUDA or no GPU is visible");
-    }
-    const int64_t count = static_cast<int64_t>(torch::cuda::device_count());
-    if (device->has_index() && device->index() >= count) {
-      throw std::invalid_argument("--device " + text + ": only " + std::to_string(count) +
-                                  " GPU(s) visible");
-    }
-  }
-  return *device;
-}
 
 // [3,H,W] float tensor of an RGB CV_32FC3 image.
 torch::Tensor ImageTensor(const cv::Mat& image) {
@@ -86,7 +64,7 @@ colmap_io::DenseArray ToDenseArray(const torch::Tensor& map) {
 
 void EstimatorOptions::Check() const {
   if (model_path.empty()) throw std::invalid_argument("--model_path must not be empty");
-  ParseDevice(device);
+  model::ParseUsableDevice(device, "--device");
   if (threads < 0) throw std::invalid_argument("--threads must be >= 0 (0 = one per core)");
   if (coarse_iterations < 0 || fine_iterations < 0) {
     throw std::invalid_argument("--coarse_iterations and --fine_iterations must be >= 0");
@@ -101,7 +79,7 @@ struct DepthEstimator::Impl {
 
 DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::make_unique<Impl>()) {
   options.Check();
-  impl_->device = ParseDevice(options.device);
+  impl_->device = model::ParseUsableDevice(options.device, "--device");
   const int threads = options.threads > 0
                           ? options.threads
                           : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));

@@ -2,7 +2,7 @@
 // here from randomly initialised networks (accuracy is not the point: the
 // shapes, the finiteness and which configurations accept no hint are).
 
-#include "src/depth_estimator.h"
+#include "dense/depth_estimator.h"
 
 #include <cmath>
 #include <optional>

@@ -1,0 +1,72 @@
+#include "dense/geometric_pass.h"
+
+#include <cstddef>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "colmap_io/dense_array.h"
+#include "dense/workspace_maps.h"
+
+namespace dispmvs::dense {
+
+namespace fs = std::filesystem;
+using namespace colmap_io;
+
+PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
+                             const fusion::GeometricFilterOptions& options, std::ostream& log) {
+  options.Check();
+  const auto start = Clock::now();
+  PassSummary summary;
+  workspace.CreateStereoFolders();
+  for (const StereoProblem& problem : plan.problems) {
+    const image_t reference = problem.reference_image_id;
+    const std::string& name = plan.ImageOf(reference).name;
+    const MapPaths input = PathsOf(workspace, name, kPhotometricType);
+    if (!fs::is_regular_file(input.depth)) {
+      ++summary.skipped_no_sources;  // nothing to filter (failed or skipped view)
+      continue;
+    }
+    try {
+      const fusion::DepthView ref = LoadDepthView(workspace, plan, reference, kPhotometricType);
+      std::vector<fusion::DepthView> sources;
+      for (image_t source : problem.source_image_ids) {
+        if (fs::is_regular_file(PathsOf(workspace, plan.ImageOf(source).name, kPhotometricType).depth)) {
+          sources.push_back(LoadDepthView(workspace, plan, source, kPhotometricType));
+        }
+      }
+      std::vector<const fusion::DepthView*> source_pointers;
+      for (const auto& source : sources) source_pointers.push_back(&source);
+      fusion::GeometricFilterOptions reference_options = options;
+      const auto lowered = plan.min_consistent_views.find(reference);
+      if (lowered != plan.min_consistent_views.end()) {
+        reference_options.min_consistent_views = lowered->second;
+      }
+      const fusion::GeometricFilterResult result =
+          fusion::FilterDepthMap(ref, source_pointers, reference_options);
+      DenseArray normal = ReadNormalsMatching(input.normal, ref.depth);
+      DenseArray confidence =
+          ref.confidence.empty() ? DenseArray(ref.depth.width(), ref.depth.height(), 1, 1.0f)
+                                 : ref.confidence;
+      const std::size_t plane = result.depth.size();
+      for (std::size_t i = 0; i < plane; ++i) {
+        if (result.depth.data()[i] > 0) continue;
+        confidence.data()[i] = 0;
+        for (int c = 0; c < 3; ++c) normal.data()[c * plane + i] = 0;
+      }
+      WriteMaps(PathsOf(workspace, name, kGeometricType), result.depth, normal, confidence);
+      ++summary.done;
+      log << "geometric: " << name << ": " << sources.size() << " source map(s), kept "
+          << Percent(ValidFraction(result.depth)) << " of pixels (photometric "
+          << Percent(ValidFraction(ref.depth)) << ")\n";
+    } catch (const std::exception& error) {
+      summary.failures.push_back(name + ": " + error.what());
+      log << "geometric: " << name << ": FAILED: " << error.what() << '\n';
+    }
+  }
+  log << std::flush;
+  summary.seconds = SecondsSince(start);
+  return summary;
+}
+
+}  // namespace dispmvs::dense

@@ -1,0 +1,24 @@
+#pragma once
+// The geometric pass of dispmvs_colmap: filters the photometric map of every
+// problem of the plan by multi-view geometric consistency against the
+// photometric maps of its sources (those that exist; fusion/geometric_filter.h)
+// and writes maps of type dispmvs.geometric (dense/workspace_maps.h): depth,
+// normal and confidence, 0 where inconsistent.
+
+#include <ostream>
+
+#include "colmap_io/workspace.h"
+#include "dense/pass_summary.h"
+#include "dense/plan.h"
+#include "fusion/geometric_filter.h"
+
+namespace dispmvs::dense {
+
+// A reference in plan.min_consistent_views needs that many agreeing sources
+// instead of options.min_consistent_views. References without a photometric
+// map count as skipped_no_sources. Always recomputed (no resume): it is cheap
+// and depends on the neighbours' maps, which a later run may have added.
+PassSummary RunGeometricPass(const colmap_io::Workspace& workspace, const DensePlan& plan,
+                             const fusion::GeometricFilterOptions& options, std::ostream& log);
+
+}  // namespace dispmvs::dense

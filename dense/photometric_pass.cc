@@ -1,0 +1,105 @@
+#include "dense/photometric_pass.h"
+
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "colmap_io/dense_array.h"
+#include "dense/workspace_maps.h"
+#include "fusion/depth_normals.h"
+#include "synth/rng.h"
+
+namespace dispmvs::dense {
+
+using namespace colmap_io;
+
+// The image-th number of the SplitMix64 stream that starts at the run's seed.
+uint64_t ViewSeed(uint64_t seed, image_t image_id) {
+  return synth::SplitMix64(seed + 0x9E3779B97F4A7C15ull * static_cast<uint64_t>(image_id));
+}
+
+void PhotometricOptions::Check() const {
+  estimator.Check();
+  if (max_image_size == 0 || max_image_size < -1) {
+    throw std::invalid_argument("--max_image_size must be positive, or -1 for full size");
+  }
+}
+
+PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan,
+                               const PhotometricOptions& options, std::ostream& log) {
+  options.Check();
+  const auto start = Clock::now();
+  PassSummary summary;
+  workspace.CreateStereoFolders();
+
+  // Work out what is left before loading the network (a finished run
+  // resumes instantly).
+  std::vector<const StereoProblem*> todo;
+  for (const StereoProblem& problem : plan.problems) {
+    const std::string& name = plan.ImageOf(problem.reference_image_id).name;
+    if (problem.source_image_ids.empty()) {
+      ++summary.skipped_no_sources;
+      log << "photometric: " << name << ": no usable source view, skipped\n";
+    } else if (!options.overwrite && PathsOf(workspace, name, kPhotometricType).AllExist()) {
+      ++summary.skipped_existing;
+    } else {
+      todo.push_back(&problem);
+    }
+  }
+  log << "photometric: " << todo.size() << " view(s) to compute, " << summary.skipped_existing
+      << " already done" << (summary.skipped_existing > 0 ? " (kept; --overwrite recomputes)" : "")
+      << '\n';
+  if (todo.empty()) {
+    summary.seconds = SecondsSince(start);
+    return summary;
+  }
+
+  // A missing hint fails the whole pass here, not once per view.
+  std::vector<image_t> without_hint;
+  for (const StereoProblem* problem : todo) {
+    if (!plan.HintFor(problem->reference_image_id)) {
+      without_hint.push_back(problem->reference_image_id);
+    }
+  }
+  CheckHintsForWeights(
+      plan, without_hint,
+      DepthEstimator::CheckWeightsFile(options.estimator.model_path).needs_depth_range);
+  DepthEstimator estimator(options.estimator);
+  log << "photometric: network " << estimator.Describe() << '\n' << std::flush;
+  const auto compute_start = Clock::now();
+  for (std::size_t i = 0; i < todo.size(); ++i) {
+    const StereoProblem& problem = *todo[i];
+    const image_t reference = problem.reference_image_id;
+    const std::string& name = plan.ImageOf(reference).name;
+    const auto view_start = Clock::now();
+    log << "photometric: [" << i + 1 << "/" << todo.size() << "] " << name << " ("
+        << problem.source_image_ids.size() << " sources)";
+    try {
+      // None without sparse points or --depth_min/--depth_max: fine for
+      // model v2 weights (checked above for the others).
+      const std::optional<DepthRange> hint = plan.HintFor(reference);
+      const std::vector<ProblemView> views =
+          LoadProblemViews(workspace, plan, problem, options.max_image_size);
+      const DepthEstimate estimate =
+          estimator.Estimate(views, hint, ViewSeed(options.seed, reference));
+      const DenseArray normal = fusion::NormalMapFromDepth(estimate.depth, views[0].K);
+      WriteMaps(PathsOf(workspace, name, kPhotometricType), estimate.depth, normal,
+                estimate.confidence);
+      ++summary.done;
+      const double per_view = SecondsSince(compute_start) / static_cast<double>(i + 1);
+      log << ": " << FormatSeconds(SecondsSince(view_start)) << ", "
+          << views[0].image.cols << "x" << views[0].image.rows << ", depth at "
+          << Percent(ValidFraction(estimate.depth)) << " of pixels, ETA "
+          << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << '\n'
+          << std::flush;
+    } catch (const std::exception& error) {
+      summary.failures.push_back(name + ": " + error.what());
+      log << ": FAILED: " << error.what() << '\n' << std::flush;
+    }
+  }
+  summary.seconds = SecondsSince(start);
+  return summary;
+}
+
+}  // namespace dispmvs::dense

@@ -1,0 +1,115 @@
+// The photometric pass on the example workspace with the shipped weights at
+// 64x48 (accuracy is the end-to-end test's business): maps of the right size
+// for every view, resuming computes only what is missing and reproduces it
+// bit for bit, and a view whose image cannot be read fails alone.
+
+#include "dense/photometric_pass.h"
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "colmap_io/dense_array.h"
+#include "dense/test_workspace.h"
+#include "dense/workspace_maps.h"
+#include "tests/support/temp_dir.h"
+
+namespace dispmvs::dense {
+namespace {
+
+namespace fs = std::filesystem;
+
+using ::dispmvs::testing::ReadFileBytes;
+
+class PhotometricPassTest : public testing::ExactMapsTest {
+ protected:
+  void SetUp() override {
+    for (const std::string& name : names_) {  // start without maps
+      const MapPaths paths = PathsOf(workspace_, name, kPhotometricType);
+      fs::remove(paths.depth);
+      fs::remove(paths.normal);
+      fs::remove(paths.confidence);
+    }
+    options_.estimator.model_path = DISPMVS_TEST_MODEL_PATH;
+    options_.estimator.threads = 1;
+    options_.max_image_size = 64;
+    options_.seed = 3;
+  }
+
+  PhotometricOptions options_;
+};
+
+TEST_F(PhotometricPassTest, WritesEveryViewAndResumesBitForBit) {
+  const PassSummary first = RunPhotometricPass(workspace_, plan_, options_, log_);
+  ASSERT_EQ(first.done, 7) << log_.str();
+  for (const std::string& name : names_) {
+    const MapPaths paths = PathsOf(workspace_, name, kPhotometricType);
+    ASSERT_TRUE(paths.AllExist()) << name;
+    const colmap_io::DenseArray depth = colmap_io::ReadDenseArray(paths.depth);
+    EXPECT_EQ(depth.width(), 64);  // 320x240 brought to --max_image_size 64
+    EXPECT_EQ(depth.height(), 48);
+    for (float d : depth.values()) ASSERT_TRUE(std::isfinite(d) && d >= 0) << name;
+    EXPECT_GT(ValidFraction(depth), 0.5) << name;
+  }
+
+  // A finished run resumes instantly.
+  const PassSummary again = RunPhotometricPass(workspace_, plan_, options_, log_);
+  EXPECT_EQ(again.done, 0);
+  EXPECT_EQ(again.skipped_existing, 7);
+
+  // A run killed between writing a view's normal and depth maps left no
+  // depth map: only that view is computed again, to the same bytes.
+  const MapPaths paths = PathsOf(workspace_, names_[4], kPhotometricType);
+  const std::string depth_bytes = ReadFileBytes(paths.depth);
+  const std::string normal_bytes = ReadFileBytes(paths.normal);
+  fs::remove(paths.depth);
+  const PassSummary resumed = RunPhotometricPass(workspace_, plan_, options_, log_);
+  EXPECT_EQ(resumed.done, 1);
+  EXPECT_EQ(resumed.skipped_existing, 6);
+  EXPECT_EQ(ReadFileBytes(paths.depth), depth_bytes);
+  EXPECT_EQ(ReadFileBytes(paths.normal), normal_bytes);
+}
+
+TEST_F(PhotometricPassTest, UnreadableImageFailsTheViewsThatNeedIt) {
+  const std::string& broken = names_[0];  // an end of the arc: fewer readers
+  std::ofstream(workspace_.ImagePath(broken), std::ios::trunc) << "not a PNG";
+  const colmap_io::image_t broken_id = plan_.model.FindImageByName(broken)->image_id;
+  std::set<std::string> readers;
+  for (const colmap_io::StereoProblem& problem : plan_.problems) {
+    bool reads = problem.reference_image_id == broken_id;
+    for (colmap_io::image_t source : problem.source_image_ids) reads |= source == broken_id;
+    if (reads) readers.insert(plan_.ImageOf(problem.reference_image_id).name);
+  }
+  ASSERT_LT(readers.size(), 7u);
+
+  const PassSummary summary = RunPhotometricPass(workspace_, plan_, options_, log_);
+  EXPECT_EQ(summary.done, 7 - static_cast<int>(readers.size())) << log_.str();
+  ASSERT_EQ(summary.failures.size(), readers.size());
+  for (const std::string& failure : summary.failures) {
+    const std::string name = failure.substr(0, failure.find(": "));
+    EXPECT_EQ(readers.count(name), 1u) << failure;
+    EXPECT_NE(failure.find(broken), std::string::npos) << failure;
+    EXPECT_FALSE(fs::exists(PathsOf(workspace_, name, kPhotometricType).depth)) << name;
+  }
+}
+
+TEST(ViewSeedTest, DependsOnRunSeedAndImageOnly) {
+  std::set<uint64_t> seeds;
+  for (uint64_t run : {0u, 1u, 2u}) {
+    for (colmap_io::image_t image = 1; image <= 100; ++image) {
+      EXPECT_EQ(ViewSeed(run, image), ViewSeed(run, image));
+      seeds.insert(ViewSeed(run, image));
+    }
+  }
+  EXPECT_EQ(seeds.size(), 300u);
+}
+
+}  // namespace
+}  // namespace dispmvs::dense
