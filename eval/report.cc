@@ -99,9 +99,6 @@ const std::string& TsvField(const std::string& text, const char* what) {
 
 // ---- JSON ----
 
-// Control characters, quotes and backslashes escaped (model/json.h).
-std::string JsonString(const std::string& text) { return model::json::Quote(text); }
-
 std::string JsonNumber(double value) {
   if (!std::isfinite(value)) return "null";
   char buffer[64];
@@ -116,7 +113,7 @@ class JsonObject {
  public:
   explicit JsonObject(int indent) : indent_(indent) {}
   JsonObject& Add(const std::string& key, const std::string& raw_value) {
-    members_.push_back(std::string(indent_ + 2, ' ') + JsonString(key) + ": " + raw_value);
+    members_.push_back(std::string(indent_ + 2, ' ') + model::json::Quote(key) + ": " + raw_value);
     return *this;
   }
   std::string str() const {
@@ -257,7 +254,7 @@ void PrintReport(const WorkspaceEvalReport& report, bool per_view, std::ostream&
 
 std::string ReportToJson(const WorkspaceEvalReport& report) {
   JsonObject root(0);
-  root.Add("workspace", JsonString(report.workspace))
+  root.Add("workspace", model::json::Quote(report.workspace))
       .Add("num_images", JsonNumber(static_cast<int64_t>(report.num_images)))
       .Add("views_with_gt", JsonNumber(static_cast<int64_t>(report.views_with_gt)))
       .Add("views_with_rectified_partner",
@@ -265,7 +262,7 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
   std::vector<std::string> types;
   for (const TypeDepthResult& type : report.types) {
     JsonObject object(4);
-    object.Add("type", JsonString(type.type))
+    object.Add("type", model::json::Quote(type.type))
         .Add("views", JsonNumber(static_cast<int64_t>(type.views.size())))
         .Add("maps_without_gt", JsonNumber(type.maps_without_gt))
         .Add("disparity_views", JsonNumber(type.disparity_sums.views));
@@ -280,14 +277,14 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
     std::vector<std::string> views;
     for (const ViewDepthResult& view : type.views) {
       JsonObject v(8);
-      v.Add("image", JsonString(view.image_name))
+      v.Add("image", model::json::Quote(view.image_name))
           .Add("width", JsonNumber(static_cast<int64_t>(view.width)))
           .Add("height", JsonNumber(static_cast<int64_t>(view.height)))
           .Add("gt_width", JsonNumber(static_cast<int64_t>(view.gt_width)))
           .Add("gt_height", JsonNumber(static_cast<int64_t>(view.gt_height)));
       if (view.disparity_geometry) {
         const DisparityGeometry& geometry = *view.disparity_geometry;
-        v.Add("rectified_partner", JsonString(geometry.partner.name))
+        v.Add("rectified_partner", model::json::Quote(geometry.partner.name))
             .Add("baseline", JsonNumber(geometry.partner.baseline))
             .Add("disparity_focal", JsonNumber(geometry.focal));
       } else {
@@ -304,7 +301,7 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
   if (report.gt_cloud) {
     const GtCloudInfo& gt = *report.gt_cloud;
     JsonObject object(2);
-    object.Add("source", JsonString(gt.source))
+    object.Add("source", model::json::Quote(gt.source))
         .Add("points", JsonNumber(gt.num_points))
         .Add("nonfinite_dropped", JsonNumber(gt.nonfinite_dropped))
         .Add("bbox_diagonal", JsonNumber(gt.bbox_diagonal))
@@ -320,7 +317,7 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
   for (const CloudResult& cloud : report.clouds) {
     const CloudMetrics& m = cloud.metrics;
     JsonObject object(4);
-    object.Add("ply", JsonString(cloud.ply_path))
+    object.Add("ply", model::json::Quote(cloud.ply_path))
         .Add("points", JsonNumber(m.num_points))
         .Add("gt_points", JsonNumber(m.num_gt_points))
         .Add("nonfinite_dropped", JsonNumber(cloud.nonfinite_dropped))
