@@ -57,6 +57,9 @@ int ExportForColmap(const Workspace& workspace, const DensePlan& plan, const fs:
   EnsureSymlink(fs::canonical(workspace.SparseDir()), root / "sparse");
   const Workspace exported(root);
   exported.CreateStereoFolders();
+  log << "export: copying the maps of " << plan.problems.size() << " reference image(s) to "
+      << root.string() << '\n'
+      << std::flush;
 
   std::vector<PatchMatchEntry> entries;
   std::vector<std::string> fusion_list;

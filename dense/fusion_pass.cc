@@ -1,6 +1,8 @@
 #include "dense/fusion_pass.h"
 
+#include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <map>
 #include <string>
 #include <utility>
@@ -14,6 +16,7 @@
 #include "dense/pass_summary.h"
 #include "dense/workspace_maps.h"
 #include "fusion/point_fusion.h"
+#include "fusion/view_cache.h"
 #include "fusion/vis_file.h"
 
 namespace dispmvs::dense {
@@ -21,12 +24,7 @@ namespace dispmvs::dense {
 namespace fs = std::filesystem;
 using namespace colmap_io;
 
-FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
-                        const fusion::GeometricFilterOptions& options, const fs::path& ply_path,
-                        std::ostream& log) {
-  options.Check();
-  const auto start = Clock::now();
-  // Which images, in which order.
+std::vector<image_t> FusionImageOrder(const Workspace& workspace, const DensePlan& plan) {
   std::vector<image_t> image_ids;
   if (fs::is_regular_file(workspace.FusionConfigPath())) {
     for (const std::string& name : ReadFusionConfig(workspace.FusionConfigPath())) {
@@ -40,54 +38,80 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
   } else {
     for (const StereoProblem& problem : plan.problems) image_ids.push_back(problem.reference_image_id);
   }
+  return image_ids;
+}
+
+FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
+                        const fusion::GeometricFilterOptions& options, const fs::path& ply_path,
+                        std::ostream& log, std::size_t max_cache_bytes) {
+  options.Check();
+  const auto start = Clock::now();
+  const std::vector<image_t> image_ids = FusionImageOrder(workspace, plan);
   std::map<image_t, const StereoProblem*> problem_of;
   for (const StereoProblem& problem : plan.problems) problem_of[problem.reference_image_id] = &problem;
   std::map<image_t, uint32_t> dense_index;
   const std::vector<image_t> order = plan.model.DenseImageOrder();
   for (std::size_t i = 0; i < order.size(); ++i) dense_index[order[i]] = static_cast<uint32_t>(i);
 
-  std::vector<fusion::FusionView> views;
+  // The views: the listed images with a depth map, once each, in order. Only
+  // their names are held here; their maps are read when fusion needs them.
+  std::vector<image_t> view_images;
   std::map<image_t, int> view_of;
   for (image_t image_id : image_ids) {
+    if (view_of.count(image_id) > 0 ||
+        !fs::is_regular_file(PathsOf(workspace, plan.ImageOf(image_id).name, kPhotometricType).depth)) {
+      continue;
+    }
+    view_of[image_id] = static_cast<int>(view_images.size());
+    view_images.push_back(image_id);
+  }
+  std::vector<bool> usable(view_images.size(), false);
+  auto load = [&](int index) -> std::shared_ptr<const fusion::FusionView> {
+    const image_t image_id = view_images[static_cast<std::size_t>(index)];
     const std::string& name = plan.ImageOf(image_id).name;
-    const MapPaths paths = PathsOf(workspace, name, kPhotometricType);
-    if (view_of.count(image_id) > 0 || !fs::is_regular_file(paths.depth)) continue;
     try {
-      fusion::FusionView view;
-      view.geometry = LoadDepthView(workspace, plan, image_id, kPhotometricType);
-      view.normals = ReadNormalsMatching(paths.normal, view.geometry.depth);
+      auto view = std::make_shared<fusion::FusionView>();
+      view->geometry = LoadDepthView(workspace, plan, image_id, kPhotometricType);
+      view->normals = ReadNormalsMatching(PathsOf(workspace, name, kPhotometricType).normal,
+                                          view->geometry.depth);
       const ResizedImage full = ReadFullImage(workspace, plan, image_id);
-      view.image = ResampleToDenseIndexGrid(full.image, full.K,
-                                            cv::Size(view.geometry.depth.width(),
-                                                     view.geometry.depth.height()))
-                       .image;
-      view.vis_index = dense_index.at(image_id);
+      view->image = ResampleToDenseIndexGrid(full.image, full.K,
+                                             cv::Size(view->geometry.depth.width(),
+                                                      view->geometry.depth.height()))
+                        .image;
+      view->vis_index = dense_index.at(image_id);
       const auto lowered = plan.min_consistent_views.find(image_id);
       if (lowered != plan.min_consistent_views.end()) {
-        view.min_consistent_views = lowered->second;
+        view->min_consistent_views = lowered->second;
       }
-      view_of[image_id] = static_cast<int>(views.size());
-      views.push_back(std::move(view));
+      const auto problem = problem_of.find(image_id);
+      if (problem != problem_of.end()) {
+        for (image_t source : problem->second->source_image_ids) {
+          const auto source_view = view_of.find(source);
+          if (source_view != view_of.end()) view->source_views.push_back(source_view->second);
+        }
+      }
+      usable[static_cast<std::size_t>(index)] = true;
+      return view;
     } catch (const std::exception& error) {
       log << "fusion: " << name << ": left out: " << error.what() << '\n';
+      return nullptr;
     }
-  }
-  for (const auto& [image_id, index] : view_of) {
-    const auto problem = problem_of.find(image_id);
-    if (problem == problem_of.end()) continue;
-    for (image_t source : problem->second->source_image_ids) {
-      const auto source_view = view_of.find(source);
-      if (source_view != view_of.end()) views[index].source_views.push_back(source_view->second);
-    }
-  }
-  const std::vector<fusion::FusedPoint> points = fusion::FusePoints(views, options);
+  };
+  fusion::FusionViewCache cache(load, max_cache_bytes);
+  const std::vector<fusion::FusedPoint> points =
+      fusion::FusePoints(static_cast<int>(view_images.size()), &cache, options);
   fusion::WriteFusedPointCloud(points, ply_path);
   FusionSummary summary;
   summary.num_points = points.size();
-  summary.num_images = static_cast<int>(views.size());
+  summary.num_images = static_cast<int>(std::count(usable.begin(), usable.end(), true));
+  summary.map_loads = cache.loads();
+  summary.peak_cache_bytes = cache.peak_bytes();
   summary.seconds = SecondsSince(start);
-  log << "fusion: " << points.size() << " points from " << views.size() << " image(s) -> "
-      << ply_path.string() << " (+ .vis), " << FormatSeconds(summary.seconds) << '\n'
+  log << "fusion: " << points.size() << " points from " << summary.num_images << " image(s) -> "
+      << ply_path.string() << " (+ .vis), " << FormatSeconds(summary.seconds) << "; "
+      << summary.map_loads << " map loads, at most " << FormatMegabytes(summary.peak_cache_bytes)
+      << " of maps held (--fusion_cache_mb " << max_cache_bytes / (1024 * 1024) << ")\n"
       << std::flush;
   return summary;
 }

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <vector>
 #include <ostream>
 
 #include "colmap_io/workspace.h"
@@ -16,16 +17,31 @@ namespace dispmvs::dense {
 
 struct FusionSummary {
   std::size_t num_points = 0;
-  int num_images = 0;
+  int num_images = 0;  // with usable maps
+  std::size_t map_loads = 0;  // reads of a view's maps and image (>= num_images)
+  std::size_t peak_cache_bytes = 0;
   double seconds = 0;
 };
+
+// Maps held at once by fusion unless one reference and its sources need more.
+inline constexpr std::size_t kDefaultFusionCacheBytes = std::size_t{1024} * 1024 * 1024;
+
+// The images fusion visits, in order: those of WS/stereo/fusion.cfg, else
+// every reference of the plan. Throws IoError when fusion.cfg cannot be read
+// or names an image that is not in the model (checked before any pass runs).
+std::vector<colmap_io::image_t> FusionImageOrder(const colmap_io::Workspace& workspace,
+                                                 const DensePlan& plan);
 
 // Writes `ply_path` and `ply_path`.vis (each through a temporary name). An
 // image whose maps cannot be read is left out with a line in `log`; a
 // fusion.cfg naming an image that is not in the model throws IoError.
-// plan.min_consistent_views applies as in RunGeometricPass.
+// plan.min_consistent_views applies as in RunGeometricPass. Maps are read
+// when needed and at most `max_cache_bytes` of them kept
+// (fusion/view_cache.h), so memory does not grow with the number of images
+// (beyond one byte per pixel per image).
 FusionSummary RunFusion(const colmap_io::Workspace& workspace, const DensePlan& plan,
                         const fusion::GeometricFilterOptions& options,
-                        const std::filesystem::path& ply_path, std::ostream& log);
+                        const std::filesystem::path& ply_path, std::ostream& log,
+                        std::size_t max_cache_bytes = kDefaultFusionCacheBytes);
 
 }  // namespace dispmvs::dense

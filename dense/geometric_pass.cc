@@ -58,10 +58,11 @@ PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
       ++summary.done;
       log << "geometric: " << name << ": " << sources.size() << " source map(s), kept "
           << Percent(ValidFraction(result.depth)) << " of pixels (photometric "
-          << Percent(ValidFraction(ref.depth)) << ")\n";
+          << Percent(ValidFraction(ref.depth)) << ")\n"
+          << std::flush;  // progress a user (or a scheduler's log) can follow
     } catch (const std::exception& error) {
       summary.failures.push_back(name + ": " + error.what());
-      log << "geometric: " << name << ": FAILED: " << error.what() << '\n';
+      log << "geometric: " << name << ": FAILED: " << error.what() << '\n' << std::flush;
     }
   }
   log << std::flush;

@@ -3,6 +3,7 @@
 // and the small formatters its progress lines share.
 
 #include <chrono>
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -12,6 +13,8 @@ struct PassSummary {
   int done = 0;
   int skipped_existing = 0;
   int skipped_no_sources = 0;
+  // Views another process was computing at the time (dense/view_claim.h).
+  int skipped_claimed = 0;
   std::vector<std::string> failures;  // "NAME: why"
   double seconds = 0;
 };
@@ -23,6 +26,8 @@ double SecondsSince(Clock::time_point start);
 std::string FormatDuration(double seconds);
 // "1.23 s".
 std::string FormatSeconds(double seconds);
+// "12.3 MB" for 12.3 x 2^20 bytes.
+std::string FormatMegabytes(std::size_t bytes);
 // "12.3%" for 0.123.
 std::string Percent(double fraction);
 

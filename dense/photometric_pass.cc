@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "colmap_io/dense_array.h"
+#include "dense/view_claim.h"
 #include "dense/workspace_maps.h"
 #include "fusion/depth_normals.h"
 #include "synth/rng.h"
@@ -76,6 +77,22 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
     log << "photometric: [" << i + 1 << "/" << todo.size() << "] " << name << " ("
         << problem.source_image_ids.size() << " sources)";
     try {
+      // Another process may hold the view (shards run at once, or the same
+      // shard twice), or may have finished it since the list above was made.
+      long holder = 0;
+      const std::optional<ViewClaim> claim = ViewClaim::TryClaim(ClaimPath(workspace, name), &holder);
+      if (!claim) {
+        ++summary.skipped_claimed;
+        log << ": skipped, another process";
+        if (holder > 0) log << " (pid " << holder << ")";
+        log << " is computing it\n" << std::flush;
+        continue;
+      }
+      if (!options.overwrite && PathsOf(workspace, name, kPhotometricType).AllExist()) {
+        ++summary.skipped_existing;
+        log << ": written by another process meanwhile, kept\n" << std::flush;
+        continue;
+      }
       // None without sparse points or --depth_min/--depth_max: fine for
       // model v2 weights (checked above for the others).
       const std::optional<DepthRange> hint = plan.HintFor(reference);

@@ -4,7 +4,8 @@
 // confidence maps of type dispmvs.photometric (dense/workspace_maps.h).
 // A view whose maps all exist is skipped unless `overwrite` (so a killed run
 // resumes where it stopped); a view that fails is reported and the others
-// go on.
+// go on. Each view is claimed (dense/view_claim.h) while it is computed; a
+// view another process has claimed is skipped (PassSummary::skipped_claimed).
 
 #include <cstdint>
 #include <ostream>

@@ -9,15 +9,18 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include "colmap_io/dense_array.h"
 #include "dense/test_workspace.h"
+#include "dense/view_claim.h"
 #include "dense/workspace_maps.h"
 #include "tests/support/temp_dir.h"
 
@@ -98,6 +101,30 @@ TEST_F(PhotometricPassTest, UnreadableImageFailsTheViewsThatNeedIt) {
     EXPECT_NE(failure.find(broken), std::string::npos) << failure;
     EXPECT_FALSE(fs::exists(PathsOf(workspace_, name, kPhotometricType).depth)) << name;
   }
+}
+
+// A view claimed by another process (here: this test, holding its lock) is
+// skipped and said so; once released, a rerun computes just that view.
+TEST_F(PhotometricPassTest, SkipsAViewAnotherProcessHasClaimed) {
+  const std::string& held = names_[2];
+  std::optional<ViewClaim> claim = ViewClaim::TryClaim(ClaimPath(workspace_, held));
+  ASSERT_TRUE(claim.has_value());
+  const PassSummary first = RunPhotometricPass(workspace_, plan_, options_, log_);
+  EXPECT_EQ(first.done, 6) << log_.str();
+  EXPECT_EQ(first.skipped_claimed, 1);
+  EXPECT_TRUE(first.failures.empty());
+  EXPECT_FALSE(fs::exists(PathsOf(workspace_, held, kPhotometricType).depth));
+  EXPECT_NE(log_.str().find(held + " (4 sources): skipped, another process (pid " +
+                            std::to_string(::getpid()) + ") is computing it"),
+            std::string::npos)
+      << log_.str();
+
+  claim.reset();
+  const PassSummary second = RunPhotometricPass(workspace_, plan_, options_, log_);
+  EXPECT_EQ(second.done, 1);
+  EXPECT_EQ(second.skipped_existing, 6);
+  EXPECT_EQ(second.skipped_claimed, 0);
+  EXPECT_TRUE(PathsOf(workspace_, held, kPhotometricType).AllExist());
 }
 
 TEST(ViewSeedTest, DependsOnRunSeedAndImageOnly) {

@@ -22,7 +22,8 @@ void RequireFinite(double value, const char* option) {
   }
 }
 
-// Dense MVS needs undistorted images: pinhole cameras only.
+// Dense MVS needs undistorted images: pinhole cameras only, with focal
+// lengths that can be inverted.
 void CheckPinholeCameras(const SparseModel& model, const Workspace& workspace) {
   for (const auto& [image_id, image] : model.images) {
     const auto camera = model.cameras.find(image.camera_id);
@@ -31,6 +32,15 @@ void CheckPinholeCameras(const SparseModel& model, const Workspace& workspace) {
                     "image \"" + image.name +
                         "\" does not use a PINHOLE or SIMPLE_PINHOLE camera; dense "
                         "reconstruction needs the output of `colmap image_undistorter`");
+    }
+    // A zero or negative focal length passes the readers (COLMAP can store
+    // one) but has no inverse: say so now, not once per view later.
+    const Eigen::Matrix3d K = camera->second.CalibrationMatrix();
+    if (!(K(0, 0) > 0 && K(1, 1) > 0)) {
+      throw IoError(workspace.SparseDir().string(),
+                    "camera " + std::to_string(camera->first) + " of image \"" + image.name +
+                        "\" has a focal length that is not positive (fx " +
+                        std::to_string(K(0, 0)) + ", fy " + std::to_string(K(1, 1)) + ")");
     }
   }
 }
@@ -67,6 +77,11 @@ void PlanProblems(const Workspace& workspace, const PlanOptions& options, DenseP
   if (std::filesystem::exists(config_path)) {
     entries = ReadPatchMatchConfig(config_path);
     plan->problems_source = config_path.string();
+    if (entries.empty()) {  // else the run would do nothing and say little
+      throw IoError(config_path.string(),
+                    "names no reference image (an empty file?): list the references and their "
+                    "sources, or delete it to reconstruct every image with `__auto__` sources");
+    }
   } else {
     entries = AutoPatchMatchConfig(plan->model, max_sources);
     plan->problems_source =

@@ -4,6 +4,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "colmap_io/atomic_file.h"
 #include "colmap_io/error.h"
 
 namespace dispmvs::dense {
@@ -47,6 +48,18 @@ bool MapPaths::AllExist() const {
 MapPaths PathsOf(const Workspace& workspace, const std::string& name, const std::string& type) {
   return {workspace.DepthMapPath(name, type), workspace.NormalMapPath(name, type),
           workspace.ConfidenceMapPath(name, type)};
+}
+
+void CheckMapFoldersWritable(const Workspace& workspace) {
+  workspace.CreateStereoFolders();
+  for (const fs::path& folder :
+       {workspace.DepthMapsDir(), workspace.NormalMapsDir(), workspace.ConfidenceMapsDir()}) {
+    try {
+      AtomicFileWriter probe(folder / "dispmvs_write_probe");  // removed again, never committed
+    } catch (const IoError&) {
+      throw IoError(folder.string(), "cannot create files in this folder (read-only?)");
+    }
+  }
 }
 
 void WriteMaps(const MapPaths& paths, const DenseArray& depth, const DenseArray& normal,

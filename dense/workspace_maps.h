@@ -38,6 +38,11 @@ struct MapPaths {
 MapPaths PathsOf(const colmap_io::Workspace& workspace, const std::string& name,
                  const std::string& type);
 
+// Creates the stereo folders and checks that a file can be created in each
+// map folder; throws IoError naming the first that refuses (read-only, not a
+// folder). Called before a pass does any work, so that it fails at once.
+void CheckMapFoldersWritable(const colmap_io::Workspace& workspace);
+
 // Each file through a temporary name; the depth map is written last, so its
 // presence marks a complete view (what resuming relies on).
 void WriteMaps(const MapPaths& paths, const colmap_io::DenseArray& depth,

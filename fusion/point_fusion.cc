@@ -4,16 +4,20 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <utility>
 #include <stdexcept>
 #include <string>
 
 #include "fusion/input_checks.h"
+#include "fusion/view_cache.h"
 
 namespace dispmvs::fusion {
 namespace {
 
-void ValidateView(const std::vector<FusionView>& views, std::size_t index) {
-  const FusionView& view = views[index];
+void ValidateView(const FusionView& view, std::size_t index, std::size_t num_views) {
   const std::string what = "FusePoints: view " + std::to_string(index);
   ValidateDepthView(view.geometry, what);
   if (!view.normals.empty()) {
@@ -43,7 +47,7 @@ void ValidateView(const std::vector<FusionView>& views, std::size_t index) {
   }
   for (std::size_t i = 0; i < view.source_views.size(); ++i) {
     const int source = view.source_views[i];
-    if (source < 0 || static_cast<std::size_t>(source) >= views.size()) {
+    if (source < 0 || static_cast<std::size_t>(source) >= num_views) {
       throw std::invalid_argument(what + ": source view index " + std::to_string(source) +
                                   " out of range");
     }
@@ -135,33 +139,60 @@ struct Accumulator {
 std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
                                    const GeometricFilterOptions& options, FusionStats* stats) {
   options.Check();
-  for (std::size_t v = 0; v < views.size(); ++v) ValidateView(views, v);
-  std::vector<ViewFrame> frames;
-  frames.reserve(views.size());
-  for (const FusionView& view : views) frames.emplace_back(view.geometry);
-  // One byte per pixel: small next to the depth, normal and colour the views
-  // already hold per pixel.
-  std::vector<std::vector<uint8_t>> consumed(views.size());
-  for (std::size_t v = 0; v < views.size(); ++v) {
-    consumed[v].assign(views[v].geometry.depth.size(), 0u);
-  }
+  for (std::size_t v = 0; v < views.size(); ++v) ValidateView(views[v], v, views.size());
+  // The caller holds every view already: the cache only lends them out.
+  FusionViewCache cache(
+      [&views](int index) {
+        return std::shared_ptr<const FusionView>(&views[static_cast<std::size_t>(index)],
+                                                 [](const FusionView*) {});
+      },
+      std::numeric_limits<std::size_t>::max());
+  return FusePoints(static_cast<int>(views.size()), &cache, options, stats);
+}
+
+std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
+                                   const GeometricFilterOptions& options, FusionStats* stats) {
+  options.Check();
+  const auto count = static_cast<std::size_t>(std::max(num_views, 0));
+  // Per-view state that outlives the cached maps: what has been consumed
+  // (one byte per pixel, made when the view is first loaded) and the frame.
+  std::vector<std::vector<uint8_t>> consumed(count);
+  std::vector<std::optional<ViewFrame>> frames(count);
+  auto get = [&](int index) {
+    std::shared_ptr<const FusionView> view = cache->Get(index);
+    const auto i = static_cast<std::size_t>(index);
+    if (view != nullptr && !frames[i]) {
+      ValidateView(*view, i, count);
+      frames[i].emplace(view->geometry);
+      consumed[i].assign(view->geometry.depth.size(), 0u);
+    }
+    return view;
+  };
   if (stats != nullptr) {
-    stats->points_per_view.assign(views.size(), 0);
-    stats->consumed_pixels_per_view.assign(views.size(), 0);
+    stats->points_per_view.assign(count, 0);
+    stats->consumed_pixels_per_view.assign(count, 0);
   }
 
   std::vector<FusedPoint> points;
   std::vector<PairConsistency> pairs;
+  std::vector<std::pair<int, std::shared_ptr<const FusionView>>> sources;
   std::array<PairConsistency::Match, kMaxSourceViews> matches;
   std::array<bool, kMaxSourceViews> agrees{};
-  for (std::size_t v = 0; v < views.size(); ++v) {
-    const FusionView& reference = views[v];
+  for (std::size_t v = 0; v < count; ++v) {
+    const std::shared_ptr<const FusionView> reference_view = get(static_cast<int>(v));
+    if (reference_view == nullptr) continue;  // left out
+    const FusionView& reference = *reference_view;
     const int min_consistent = reference.min_consistent_views >= 0
                                    ? reference.min_consistent_views
                                    : options.min_consistent_views;
+    // Sources that cannot be loaded are left out, as if not listed.
+    sources.clear();
     pairs.clear();
     for (int source : reference.source_views) {
-      pairs.emplace_back(reference.geometry, views[source].geometry, options);
+      std::shared_ptr<const FusionView> view = get(source);
+      if (view == nullptr) continue;
+      pairs.emplace_back(reference.geometry, view->geometry, options);
+      sources.emplace_back(source, std::move(view));
     }
     const int width = reference.geometry.depth.width();
     const int height = reference.geometry.depth.height();
@@ -174,23 +205,23 @@ std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
           if (stats != nullptr) ++stats->consumed_pixels_per_view[v];
           continue;
         }
-        int count = 0;
+        int agreeing = 0;
         for (std::size_t s = 0; s < pairs.size(); ++s) {
           agrees[s] = pairs[s].Check(row, col, depth[index], &matches[s]);
-          count += agrees[s] ? 1 : 0;
+          agreeing += agrees[s] ? 1 : 0;
         }
-        if (count < min_consistent) continue;
+        if (agreeing < min_consistent) continue;
 
         Accumulator sum;
-        sum.Add(reference, frames[v], row, col, depth[index]);
+        sum.Add(reference, *frames[v], row, col, depth[index]);
         consumed[v][index] = 1;
         for (std::size_t s = 0; s < pairs.size(); ++s) {
           if (!agrees[s]) continue;
-          const int source = reference.source_views[s];
+          const auto source = static_cast<std::size_t>(sources[s].first);
+          const FusionView& source_view = *sources[s].second;
           const PairConsistency::Match& match = matches[s];
-          sum.Add(views[source], frames[source], match.row, match.col, match.depth);
-          consumed[source][static_cast<std::size_t>(match.row) *
-                               views[source].geometry.depth.width() +
+          sum.Add(source_view, *frames[source], match.row, match.col, match.depth);
+          consumed[source][static_cast<std::size_t>(match.row) * source_view.geometry.depth.width() +
                            match.col] = 1;
         }
         points.push_back(sum.Finish());

@@ -71,4 +71,17 @@ std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
                                    const GeometricFilterOptions& options,
                                    FusionStats* stats = nullptr);
 
+class FusionViewCache;  // fusion/view_cache.h
+
+// The same, with views 0 .. num_views - 1 taken from `cache` when needed (a
+// reference and its sources at a time), so that the maps held at once stay
+// within the cache's budget whatever the number of views; only one byte per
+// pixel of every view (what has been consumed) is kept throughout. A view
+// the cache cannot load is left out, as a reference and as a source. Each
+// view is checked as above when first loaded. Gives the points of the
+// vector form for the same usable views.
+std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
+                                   const GeometricFilterOptions& options,
+                                   FusionStats* stats = nullptr);
+
 }  // namespace dispmvs::fusion

@@ -8,6 +8,7 @@
 // reported, the others go on, and the exit status is 1 at the end.
 
 #include <boost/program_options.hpp>
+#include <sys/resource.h>
 
 #include <algorithm>
 #include <chrono>
@@ -22,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "colmap_io/atomic_file.h"
 #include "colmap_io/error.h"
 #include "colmap_io/workspace.h"
 #include "fusion/geometric_filter.h"
@@ -31,6 +33,7 @@
 #include "dense/photometric_pass.h"
 #include "dense/plan.h"
 #include "dense/depth_estimator.h"
+#include "dense/workspace_maps.h"
 #include "src/program_main.h"
 #include "src/program_options.h"
 
@@ -57,7 +60,10 @@ WS/sparse, WS/stereo). The default mode runs three passes, like
 PatchMatch's maps (NAME.photometric.bin, NAME.geometric.bin) are never
 touched. Views whose photometric maps exist are skipped (resume after an
 interruption; --overwrite recomputes); files are written under a temporary
-name and renamed, so an interrupted run leaves no half-written file.
+name and renamed, so an interrupted run leaves no half-written file. Several
+processes may share a workspace (--shard K/N, run at once): each view is
+claimed with a lock in WS/stereo/dispmvs_claims/ while it is computed, so a
+view another process is computing is skipped and said so.
 
 Depth range: each image's range comes from the sparse points it sees (COLMAP's
 percentiles and margin; an image seeing none takes the union of the others'),
@@ -102,6 +108,7 @@ struct Options {
   std::string export_path;
   std::string image_list_path;
   std::string shard;  // "K/N"
+  int fusion_cache_mb = static_cast<int>(dense::kDefaultFusionCacheBytes / (1024 * 1024));
   // Whether --min_num_consistent was given: the default adapts to references
   // with fewer sources, a value the user chose does not
   // (dense::PlanMinConsistentViews).
@@ -145,6 +152,7 @@ void Options::Check() const {
     throw std::invalid_argument("--min_confidence must be in [0, 1]");
   }
   filter.Check();
+  if (fusion_cache_mb < 1) throw std::invalid_argument("--fusion_cache_mb must be at least 1");
   if (mode == "export" && export_path.empty()) {
     throw std::invalid_argument("--mode export needs --export_path");
   }
@@ -244,6 +252,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "no reference can meet stops the run before any work.")
       ("min_confidence", po::value<double>(&o.filter.min_confidence)->default_value(0),
        "Drop pixels whose network confidence (in [0, 1]) is lower.")
+      ("fusion_cache_mb", po::value<int>(&o.fusion_cache_mb)->default_value(o.fusion_cache_mb),
+       "Fusion reads each image's maps when it needs them and keeps at most this many MB "
+       "of them (more only if one reference and its sources need it), so memory does not "
+       "grow with the number of images.")
       ("output_path", po::value<std::string>(&o.output_path),
        "Fused point cloud; default WS/fused.ply (its visibility goes to OUTPUT.vis).")
       ("export_path", po::value<std::string>(&o.export_path),
@@ -275,12 +287,22 @@ std::vector<std::string> ReadImageList(const std::string& path) {
 
 void PrintPassSummary(const char* pass, const dense::PassSummary& summary, std::ostream& out) {
   out << "summary: " << pass << ": " << summary.done << " done, " << summary.skipped_existing
-      << " skipped (existing), " << summary.skipped_no_sources << " skipped (no sources or input), "
-      << summary.failures.size() << " failed";
+      << " skipped (existing), " << summary.skipped_no_sources << " skipped (no sources or input), ";
+  if (summary.skipped_claimed > 0) {
+    out << summary.skipped_claimed << " skipped (another process was computing them), ";
+  }
+  out << summary.failures.size() << " failed";
   char seconds[32];
   std::snprintf(seconds, sizeof seconds, ", %.1f s\n", summary.seconds);
   out << seconds;
   for (const std::string& failure : summary.failures) out << "  failed: " << failure << '\n';
+}
+
+// The process's peak resident memory so far (what /usr/bin/time reports).
+double PeakMemoryMegabytes() {
+  rusage usage{};
+  if (::getrusage(RUSAGE_SELF, &usage) != 0) return 0;
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;  // kilobytes on Linux
 }
 
 // Why fusion may have produced nothing, from what the run knows.
@@ -348,6 +370,15 @@ int Run(const Options& options) {
     std::cout << "warning: image file missing, not used: " << plan.ImageOf(image_id).name << '\n';
   }
   if (!consistency_warning.empty()) std::cout << "warning: " << consistency_warning << '\n';
+  const fs::path ply = options.output_path.empty() ? workspace.root() / "fused.ply"
+                                                   : fs::path(options.output_path);
+  // A fusion.cfg naming unknown images, or an output that cannot be written,
+  // fails now, not after the network has run.
+  dense::CheckMapFoldersWritable(workspace);
+  if (options.mode == "full" || options.mode == "fuse") {
+    dense::FusionImageOrder(workspace, plan);
+    colmap_io::AtomicFileWriter probe(ply);  // a temporary file, removed at once
+  }
   bool failed = !plan.missing_images.empty() && options.mode != "fuse";
   std::vector<std::pair<const char*, dense::PassSummary>> summaries;
   if (options.mode == "full" || options.mode == "photometric") {
@@ -355,16 +386,23 @@ int Run(const Options& options) {
                            dense::RunPhotometricPass(workspace, plan, options.photometric, std::cout));
   }
   std::optional<dense::FusionSummary> fusion_summary;
-  const fs::path ply = options.output_path.empty() ? workspace.root() / "fused.ply"
-                                                   : fs::path(options.output_path);
   if (options.mode == "full" || options.mode == "fuse") {
     summaries.emplace_back("geometric",
                            dense::RunGeometricPass(workspace, plan, options.filter, std::cout));
-    fusion_summary = dense::RunFusion(workspace, plan, options.filter, ply, std::cout);
+    fusion_summary = dense::RunFusion(workspace, plan, options.filter, ply, std::cout,
+                                      static_cast<std::size_t>(options.fusion_cache_mb) << 20);
   }
   for (const auto& [pass, summary] : summaries) {
     PrintPassSummary(pass, summary, std::cout);
     failed = failed || !summary.failures.empty();
+    // Not a failure of this run (the other process owns those views), but
+    // the user should know this run's part is not all there yet.
+    if (summary.skipped_claimed > 0) {
+      std::cout << "warning: " << summary.skipped_claimed
+                << " view(s) were being computed by another process on this workspace (the same "
+                   "--shard started twice?); once it ends, rerun this command to pick up any "
+                   "view it did not finish\n";
+    }
   }
   if (fusion_summary) {
     std::cout << "summary: fusion: " << fusion_summary->num_points << " points from "
@@ -378,8 +416,8 @@ int Run(const Options& options) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   char total[64];
-  std::snprintf(total, sizeof total, "summary: total %.1f s%s\n", seconds,
-                failed ? " (with failures: exit status 1)" : "");
+  std::snprintf(total, sizeof total, "summary: total %.1f s, peak memory %.0f MB%s\n", seconds,
+                PeakMemoryMegabytes(), failed ? " (with failures: exit status 1)" : "");
   std::cout << total;
   return failed ? 1 : 0;
 }

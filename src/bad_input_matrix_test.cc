@@ -1,0 +1,517 @@
+// One table of bad inputs to dispmvs_colmap and dispmvs_eval: each case
+// breaks a fresh copy of the embedded example (or passes a bad option) and
+// pins the exit status, the first line of the message that says what is
+// wrong, and what may be written: nothing at all when the input is refused
+// before any work, or, when single views fail, nothing for those views and
+// only complete files for the others (every written map and cloud parses).
+//
+// {WS} in an expected line stands for the case's workspace, {DIR} for its
+// scratch folder.
+
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <csignal>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "colmap_io/dense_array.h"
+#include "colmap_io/ply.h"
+#include "colmap_io/sparse_model_io.h"
+#include "dense/test_workspace.h"
+#include "examples/example_workspace.h"
+#include "tests/support/run_program.h"
+#include "tests/support/temp_dir.h"
+
+namespace dispmvs {
+namespace {
+
+namespace fs = std::filesystem;
+using testing::ReadFileBytes;
+using testing::TempDir;
+using testing::WriteFileBytes;
+
+enum class Program { kColmap, kEval };
+enum class Written {
+  kNothing,        // no file created or changed anywhere
+  kOthersOnly,     // `failed_views` have no maps; every written file is complete
+};
+
+struct BadInputCase {
+  std::string name;
+  int status = 1;
+  std::string first_line;  // of standard error, else the first warning or FAILED line
+  Program program = Program::kColmap;
+  // Breaks the workspace at ws (the example, seed 1; for kEval with exact
+  // maps as dispmvs.photometric and its ground truth).
+  std::function<void(const fs::path& ws)> breaks;
+  std::string args;  // after --workspace_path WS; {WS} and {DIR} substituted
+  Written written = Written::kNothing;
+  std::vector<std::string> failed_views = {};
+  // > 0: the most bytes any file may have (RLIMIT_FSIZE), a full disk.
+  rlim_t file_size_limit = 0;
+  bool needs_non_root = false;  // permissions do not stop root
+};
+
+// --- ways to break a workspace ------------------------------------------
+
+void Truncate(const fs::path& path, double keep) {
+  const std::string bytes = ReadFileBytes(path);
+  WriteFileBytes(path, bytes.substr(0, static_cast<std::size_t>(bytes.size() * keep)));
+}
+
+void Overwrite(const fs::path& path, const std::string& bytes) { WriteFileBytes(path, bytes); }
+
+// The sparse model rewritten as text (what COLMAP's model_converter
+// writes), so that single numbers can be edited.
+void SparseToText(const fs::path& ws) {
+  if (!fs::exists(ws / "sparse" / "cameras.bin")) return;  // done already
+  const colmap_io::SparseModel model = colmap_io::ReadSparseModelBinary(ws / "sparse");
+  for (const char* file : {"cameras.bin", "images.bin", "points3D.bin"}) fs::remove(ws / "sparse" / file);
+  colmap_io::WriteSparseModelText(model, ws / "sparse");
+}
+
+// Replaces the `token`-th whitespace-separated token of the `record`-th
+// non-comment line of a text model file (images.txt: two lines per image).
+void EditText(const fs::path& path, int record, int token, const std::string& value) {
+  std::istringstream in(ReadFileBytes(path));
+  std::ostringstream out;
+  std::string line;
+  int index = 0;
+  while (std::getline(in, line)) {
+    if (!line.empty() && line[0] != '#' && index++ == record) {
+      std::istringstream tokens(line);
+      std::vector<std::string> parts;
+      std::string part;
+      while (tokens >> part) parts.push_back(part);
+      parts.at(static_cast<std::size_t>(token)) = value;
+      line.clear();
+      for (const std::string& p : parts) line += (line.empty() ? "" : " ") + p;
+    }
+    out << line << '\n';
+  }
+  WriteFileBytes(path, out.str());
+}
+
+void EditCamera(const fs::path& ws, int token, const std::string& value) {
+  SparseToText(ws);
+  EditText(ws / "sparse" / "cameras.txt", 0, token, value);
+}
+
+// Image records of images.txt are every other line (the pose line).
+void EditImage(const fs::path& ws, int image, int token, const std::string& value) {
+  SparseToText(ws);
+  EditText(ws / "sparse" / "images.txt", 2 * image, token, value);
+}
+
+std::function<void(const fs::path&)> Nothing() {
+  return [](const fs::path&) {};
+}
+
+std::vector<BadInputCase> Cases() {
+  const std::string fast = " --max_image_size 64 --threads 1";
+  std::vector<BadInputCase> cases = {
+      // Sparse model files.
+      {"cameras_bin_truncated", 1,
+       "error: {WS}/sparse/cameras.bin: number of cameras is 1 but only 24 bytes remain (at least 48 per entry): wrong count or truncated file",
+       Program::kColmap,
+       [](const fs::path& ws) { Truncate(ws / "sparse" / "cameras.bin", 0.5); }, fast},
+      {"images_bin_truncated", 1,
+       "error: {WS}/sparse/images.bin: image #3 (image_id 4): number of points2D is 2482 but only 28406 bytes remain (at least 24 per entry): wrong count or truncated file",
+       Program::kColmap,
+       [](const fs::path& ws) { Truncate(ws / "sparse" / "images.bin", 0.5); }, fast},
+      {"points3D_bin_truncated", 1,
+       "error: {WS}/sparse/points3D.bin: point3D #2201 (point3D_id 2202): truncated data: xyz needs 8 bytes but only 4 remain",
+       Program::kColmap,
+       [](const fs::path& ws) { Truncate(ws / "sparse" / "points3D.bin", 0.7); }, fast},
+      {"cameras_bin_garbage", 1,
+       "error: {WS}/sparse/cameras.bin: number of cameras is 18446744073709551615 but only 56 bytes remain (at least 48 per entry): wrong count or truncated file",
+       Program::kColmap,
+       [](const fs::path& ws) { Overwrite(ws / "sparse" / "cameras.bin", std::string(64, '\xff')); },
+       fast},
+      {"images_bin_empty", 1,
+       "error: {WS}/sparse/images.bin: truncated data: number of images needs 8 bytes but only 0 remain",
+       Program::kColmap,
+       [](const fs::path& ws) { Overwrite(ws / "sparse" / "images.bin", ""); }, fast},
+      {"cameras_missing", 1,
+       "error: {WS}/sparse: no COLMAP sparse model here: expected cameras, images and points3D as .bin (all three) or .txt (all three)",
+       Program::kColmap,
+       [](const fs::path& ws) { fs::remove(ws / "sparse" / "cameras.bin"); }, fast},
+      {"sparse_folder_missing", 1,
+       "error: {WS}/sparse: sparse folder of the workspace does not exist",
+       Program::kColmap,
+       [](const fs::path& ws) { fs::remove_all(ws / "sparse"); }, fast},
+      {"images_folder_missing", 1,
+       "error: {WS}/images: images folder of the workspace does not exist",
+       Program::kColmap,
+       [](const fs::path& ws) { fs::remove_all(ws / "images"); }, fast},
+      // Cameras and poses.
+      {"camera_zero_focal", 1,
+       "error: {WS}/sparse: camera 1 of image \"view_00.png\" has a focal length that is not positive (fx 0.000000, fy 280.000000)",
+       Program::kColmap,
+       [](const fs::path& ws) { EditCamera(ws, 4, "0"); }, fast},
+      {"camera_nan_focal", 1,
+       "error: {WS}/sparse/cameras.txt: line 4: camera 1: non-finite camera parameter (NaN or inf)",
+       Program::kColmap,
+       [](const fs::path& ws) { EditCamera(ws, 4, "nan"); }, fast},
+      {"camera_inf_principal_point", 1,
+       "error: {WS}/sparse/cameras.txt: line 4: camera 1: non-finite camera parameter (NaN or inf)",
+       Program::kColmap,
+       [](const fs::path& ws) { EditCamera(ws, 6, "inf"); }, fast},
+      {"camera_not_pinhole", 1,
+       "error: {WS}/sparse: image \"view_00.png\" does not use a PINHOLE or SIMPLE_PINHOLE camera; dense reconstruction needs the output of `colmap image_undistorter`",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         EditCamera(ws, 1, "SIMPLE_RADIAL");  // f cx cy k: drop one number
+         EditText(ws / "sparse" / "cameras.txt", 0, 7, "0.01");
+       },
+       fast},
+      {"camera_zero_width", 1,
+       "error: {WS}/sparse/cameras.txt: line 4: camera 1: zero image width or height",
+       Program::kColmap,
+       [](const fs::path& ws) { EditCamera(ws, 2, "0"); }, fast},
+      {"image_nan_rotation", 1,
+       "error: {WS}/sparse/images.txt: line 9: image 3: non-finite rotation quaternion (NaN or inf)",
+       Program::kColmap,
+       [](const fs::path& ws) { EditImage(ws, 2, 1, "nan"); }, fast},
+      {"image_zero_quaternion", 1,
+       "error: {WS}/sparse/images.txt: line 9: image 3: rotation quaternion cannot be normalised (norm 0.000000)",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         for (int token = 1; token <= 4; ++token) EditImage(ws, 2, token, "0");
+       },
+       fast},
+      {"image_inf_translation", 1,
+       "error: {WS}/sparse/images.txt: line 9: image 3: non-finite translation (NaN or inf)",
+       Program::kColmap,
+       [](const fs::path& ws) { EditImage(ws, 2, 6, "inf"); }, fast},
+      {"image_unknown_camera", 1,
+       "error: {WS}/sparse: image 3 ('view_02.png') uses camera 99, which cameras does not contain",
+       Program::kColmap,
+       [](const fs::path& ws) { EditImage(ws, 2, 8, "99"); }, fast},
+      {"duplicate_image_names", 1,
+       "error: {WS}/sparse: images 2 and 3 have the same name 'view_01.png'",
+       Program::kColmap,
+       [](const fs::path& ws) { EditImage(ws, 2, 9, "view_01.png"); }, fast},
+      {"point_nan_position", 1,
+       "error: {WS}/sparse/points3D.txt: line 4: point3D 1: non-finite position (NaN or inf)",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         SparseToText(ws);
+         EditText(ws / "sparse" / "points3D.txt", 0, 1, "nan");
+       },
+       fast},
+      {"no_sparse_points_paper_weights", 1,
+       "error: no depth-range hint for 7 reference image(s) (view_00.png, view_01.png, view_02.png, view_03.png, view_04.png and 2 more): no image sees sparse points to derive one from, and these weights (init = random, the paper's) draw their initialisation inside it; pass --depth_min and --depth_max (the scene's depth range in the model's units; a rough, wide one is enough), or use model v2 weights (init = match), which need no hint",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         SparseToText(ws);
+         std::ostringstream images;  // observations dropped with the points
+         std::istringstream in(ReadFileBytes(ws / "sparse" / "images.txt"));
+         std::string line;
+         int index = 0;
+         while (std::getline(in, line)) {
+           if (!line.empty() && line[0] != '#' && index++ % 2 == 1) line.clear();
+           images << line << '\n';
+         }
+         WriteFileBytes(ws / "sparse" / "images.txt", images.str());
+         WriteFileBytes(ws / "sparse" / "points3D.txt", "");
+       },
+       fast + " --model_path " + DISPMVS_PAPER_MODEL_PATH},
+      // Images.
+      {"image_missing", 1,
+       "warning: image file missing, not used: view_03.png",
+       Program::kColmap,
+       [](const fs::path& ws) { fs::remove(ws / "images" / "view_03.png"); }, fast,
+       Written::kOthersOnly, {"view_03.png"}},
+      {"image_unreadable", 1,
+       "photometric: [1/7] view_00.png (4 sources): FAILED: {WS}/images/view_00.png: cannot decode image",
+       Program::kColmap,
+       [](const fs::path& ws) { Overwrite(ws / "images" / "view_00.png", "not a PNG"); }, fast,
+       Written::kOthersOnly, {"view_00.png"}},
+      {"image_size_disagrees_with_camera", 1,
+       "photometric: [1/7] view_00.png (4 sources): FAILED: {WS}/images/view_00.png: image is 160x120 but camera 1 is 320x240 (dense MVS needs the undistorted images)",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         const fs::path image = ws / "images" / "view_00.png";
+         cv::Mat resized;
+         cv::resize(cv::imread(image.string()), resized, cv::Size(160, 120));
+         cv::imwrite(image.string(), resized);
+       },
+       fast, Written::kOthersOnly, {"view_00.png"}},
+      // Configurations.
+      {"patch_match_cfg_empty", 1,
+       "error: {WS}/stereo/patch-match.cfg: names no reference image (an empty file?): list the references and their sources, or delete it to reconstruct every image with `__auto__` sources",
+       Program::kColmap,
+       [](const fs::path& ws) { Overwrite(ws / "stereo" / "patch-match.cfg", ""); }, fast},
+      {"patch_match_cfg_self_reference", 1,
+       "error: {WS}/stereo/patch-match.cfg: line 2: \"view_00.png\" lists itself as a source image",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         Overwrite(ws / "stereo" / "patch-match.cfg", "view_00.png\nview_00.png, view_01.png\n");
+       },
+       fast},
+      {"patch_match_cfg_unknown_image", 1,
+       "error: {WS}/stereo/patch-match.cfg: source image \"nope.png\" of \"view_00.png\" is not an image of the sparse model",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         Overwrite(ws / "stereo" / "patch-match.cfg", "view_00.png\nnope.png\n");
+       },
+       fast},
+      {"patch_match_cfg_bad_auto", 1,
+       "error: {WS}/stereo/patch-match.cfg: line 2: \"x\" is not a number of images (expected \"__auto__, N\" with N a positive integer)",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         Overwrite(ws / "stereo" / "patch-match.cfg", "view_00.png\n__auto__, x\n");
+       },
+       fast},
+      {"fusion_cfg_unknown_image", 1,
+       "error: {WS}/stereo/fusion.cfg: image \"nope.png\" is not in the sparse model",
+       Program::kColmap,
+       [](const fs::path& ws) { Overwrite(ws / "stereo" / "fusion.cfg", "view_00.png\nnope.png\n"); },
+       fast},
+      // Options.
+      {"model_missing", 1,
+       "error: cannot use the weights {DIR}/none.safetensors: safetensors {DIR}/none.safetensors: cannot open for reading (no such file)",
+       Program::kColmap, Nothing(), fast + " --model_path {DIR}/none.safetensors"},
+      {"model_truncated", 1,
+       "error: cannot use the weights {DIR}/cut.safetensors: safetensors {DIR}/cut.safetensors: tensor 'context_encoder.net.down16.first.conv.weight': data_offsets [3318596, 3429188] outside the data section of 3343308 bytes",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         fs::copy_file(DISPMVS_MODEL_PATH, ws.parent_path() / "cut.safetensors");
+         Truncate(ws.parent_path() / "cut.safetensors", 0.5);
+       },
+       fast + " --model_path {DIR}/cut.safetensors"},
+      {"model_garbage", 1,
+       "error: cannot use the weights {DIR}/g.safetensors: safetensors {DIR}/g.safetensors: file too short for the header length",
+       Program::kColmap,
+       [](const fs::path& ws) { WriteFileBytes(ws.parent_path() / "g.safetensors", "{}{}{}"); },
+       fast + " --model_path {DIR}/g.safetensors"},
+      {"depth_range_inverted", 1,
+       "error: --depth_min must be smaller than --depth_max",
+       Program::kColmap, Nothing(), fast + " --depth_min 5 --depth_max 1"},
+      {"depth_min_nan", 1,
+       "error: --depth_min must be a finite number",
+       Program::kColmap, Nothing(), fast + " --depth_min nan --depth_max 1"},
+      {"max_image_size_zero", 1,
+       "error: --max_image_size must be positive, or -1 for full size",
+       Program::kColmap, Nothing(), " --max_image_size 0"},
+      {"shard_out_of_range", 1,
+       "error: --shard must be K/N with 0 <= K < N (e.g. 0/4), got '2/2'",
+       Program::kColmap, Nothing(), fast + " --mode photometric --shard 2/2"},
+      {"image_list_unknown_image", 1,
+       "error: image \"nope.png\" of the image list is not a reference image of the plan",
+       Program::kColmap,
+       [](const fs::path& ws) { WriteFileBytes(ws.parent_path() / "list.txt", "nope.png\n"); },
+       fast + " --mode photometric --image_list {DIR}/list.txt"},
+      // Where the outputs go.
+      {"output_folder_is_a_file", 1,
+       "error: {WS}/stereo/depth_maps: cannot create directory: Not a directory",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         fs::remove_all(ws / "stereo" / "depth_maps");
+         WriteFileBytes(ws / "stereo" / "depth_maps", "x");
+       },
+       fast},
+      {"output_folder_read_only", 1,
+       "error: {WS}/stereo/depth_maps: cannot create files in this folder (read-only?)",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         fs::permissions(ws / "stereo" / "depth_maps", fs::perms::owner_write,
+                         fs::perm_options::remove);
+       },
+       fast, Written::kNothing, {}, 0, /*needs_non_root=*/true},
+      // What root cannot write either: a map folder that leads into /proc.
+      {"output_folder_not_writable", 1,
+       "error: {WS}/stereo/normal_maps: cannot create files in this folder (read-only?)",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         fs::remove_all(ws / "stereo" / "normal_maps");
+         fs::create_directory_symlink("/proc", ws / "stereo" / "normal_maps");
+       },
+       fast},
+      {"disk_full", 1,
+       "photometric: [1/7] view_00.png (4 sources): FAILED: {WS}/stereo/confidence_maps/view_00.png.dispmvs.photometric.bin: write failed (disk full?)",
+       Program::kColmap, Nothing(), fast, Written::kOthersOnly,
+       {"view_00.png", "view_01.png", "view_02.png", "view_03.png", "view_04.png", "view_05.png",
+        "view_06.png"},
+       /*file_size_limit=*/8192},
+      {"output_path_unwritable", 1,
+       "error: /proc/fused.ply: cannot open for writing",
+       Program::kColmap, Nothing(),
+       fast + " --output_path /proc/fused.ply"},
+      // Evaluation.
+      {"eval_ground_truth_missing", 1,
+       "error: {WS}/ground_truth/depth_maps: no ground truth: expected a depth map NAME.bin per image in this folder",
+       Program::kEval,
+       [](const fs::path& ws) { fs::remove_all(ws / "ground_truth"); }, ""},
+      {"eval_ground_truth_truncated", 1,
+       "error: {WS}/ground_truth/depth_maps/view_00.png.bin: truncated: header says 320x240x1 (307200 bytes of float32) but 153595 bytes follow the header",
+       Program::kEval,
+       [](const fs::path& ws) {
+         Truncate(ws / "ground_truth" / "depth_maps" / "view_00.png.bin", 0.5);
+       },
+       ""},
+      {"eval_map_wrong_size", 1,
+       "error: {WS}/stereo/depth_maps/view_01.png.dispmvs.photometric.bin: depth map is 7x9 but its ground truth is 320x240: not the same size nor a down-scale of it by one factor",
+       Program::kEval,
+       [](const fs::path& ws) {
+         colmap_io::WriteDenseArray(colmap_io::DenseArray(7, 9, 1, 1.0f),
+                                    ws / "stereo" / "depth_maps" /
+                                        "view_01.png.dispmvs.photometric.bin");
+       },
+       ""},
+      {"eval_ply_missing", 1,
+       "error: {DIR}/none.ply: no such file",
+       Program::kEval, Nothing(), " --ply {DIR}/none.ply"},
+      {"eval_ply_truncated", 1,
+       "error: {DIR}/cut.ply: PLY body has 2113 bytes, 100 vertices need more",
+       Program::kEval,
+       [](const fs::path& ws) {
+         std::vector<colmap_io::PlyPoint> points(100);
+         colmap_io::WritePlyPoints(points, ws.parent_path() / "cut.ply");
+         Truncate(ws.parent_path() / "cut.ply", 0.8);
+       },
+       " --ply {DIR}/cut.ply"},
+      {"eval_json_unwritable", 1,
+       "error: /proc/eval.json: cannot open for writing",
+       Program::kEval, Nothing(), " --json /proc/eval.json"},
+  };
+  return cases;
+}
+
+// Every file under `root` that is not a temporary one; relative path -> bytes.
+std::map<std::string, std::string> Files(const fs::path& root) {
+  std::map<std::string, std::string> files;
+  for (const auto& entry : fs::recursive_directory_iterator(root)) {
+    if (!entry.is_regular_file()) continue;
+    if (entry.path().filename().string().find(".tmp-") != std::string::npos) continue;
+    const std::string relative = fs::relative(entry.path(), root).string();
+    if (relative.find("dispmvs_claims") != std::string::npos) continue;  // locks, not outputs
+    files[relative] = ReadFileBytes(entry.path());
+  }
+  return files;
+}
+
+std::string Substitute(std::string text, const fs::path& ws, const fs::path& dir) {
+  for (const auto& [key, value] : {std::pair<std::string, std::string>{"{WS}", ws.string()},
+                                   {"{DIR}", dir.string()}}) {
+    for (std::size_t at; (at = text.find(key)) != std::string::npos;) text.replace(at, key.size(), value);
+  }
+  return text;
+}
+
+// What says what went wrong: the first line of standard error (refused
+// before any work: the programs' one-line convention), else the first line
+// of standard output that reports a failed view or warns.
+std::string Message(const testing::ProgramRun& run) {
+  if (!run.err.empty()) return run.err.substr(0, run.err.find('\n'));
+  std::istringstream out(run.out);
+  std::string line;
+  while (std::getline(out, line)) {
+    if (line.rfind("warning: ", 0) == 0 || line.find("FAILED") != std::string::npos) return line;
+  }
+  return "";
+}
+
+// The paths that differ between two snapshots (files are too big to print).
+std::vector<std::string> Changed(const std::map<std::string, std::string>& before,
+                                 const std::map<std::string, std::string>& after) {
+  std::vector<std::string> changed;
+  for (const auto& [path, bytes] : after) {
+    const auto old = before.find(path);
+    if (old == before.end() || old->second != bytes) changed.push_back(path);
+  }
+  for (const auto& [path, bytes] : before) {
+    if (after.count(path) == 0) changed.push_back(path + " (removed)");
+  }
+  return changed;
+}
+
+// Test names and failure messages show the case's name, not its bytes.
+void PrintTo(const BadInputCase& bad, std::ostream* out) { *out << bad.name; }
+
+class BadInputTest : public ::testing::TestWithParam<BadInputCase> {};
+
+TEST_P(BadInputTest, ExitStatusMessageAndNothingPartial) {
+  const BadInputCase& bad = GetParam();
+  TempDir dir;
+  const fs::path ws = dir.path() / "ws";
+  if (bad.program == Program::kEval) {
+    dense::testing::WriteExampleWithExactMaps(ws);
+  } else {
+    examples::ExampleWorkspaceOptions example;
+    example.seed = 1;
+    examples::WriteExampleWorkspace(ws, example);
+  }
+  bad.breaks(ws);
+  const auto before = Files(dir.path());
+  const std::string program =
+      bad.program == Program::kColmap ? DISPMVS_COLMAP_PROGRAM : DISPMVS_EVAL_PROGRAM;
+  if (bad.needs_non_root && ::geteuid() == 0) {
+    GTEST_SKIP() << "root writes into read-only folders; run as another user to check this case";
+  }
+  TempDir scratch;
+  const std::string args =
+      "--workspace_path '" + ws.string() + "'" + Substitute(bad.args, ws, dir.path());
+  testing::ProgramRun run;
+  if (bad.file_size_limit > 0) {
+    // A full disk: writes beyond the limit fail with EFBIG (SIGXFSZ ignored,
+    // as the child inherits both).
+    rlimit old_limit{};
+    ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old_limit), 0);
+    const auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
+    rlimit limit = old_limit;
+    limit.rlim_cur = bad.file_size_limit;
+    ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &limit), 0);
+    run = testing::RunProgram(scratch, program, args);
+    ::setrlimit(RLIMIT_FSIZE, &old_limit);
+    std::signal(SIGXFSZ, old_handler);
+  } else {
+    run = testing::RunProgram(scratch, program, args);
+  }
+  const std::string message = Message(run);
+  std::printf("%s: status %d: %s\n", bad.name.c_str(), run.status, message.c_str());
+  EXPECT_EQ(run.status, bad.status) << run.out << run.err;
+  EXPECT_EQ(message, Substitute(bad.first_line, ws, dir.path())) << run.out << run.err;
+  if (!run.err.empty()) {  // the error convention: one line
+    EXPECT_EQ(run.err.find('\n'), run.err.size() - 1) << run.err;
+  }
+  const auto after = Files(dir.path());
+  if (bad.written == Written::kNothing) {
+    EXPECT_EQ(Changed(before, after), std::vector<std::string>{});
+    return;
+  }
+  for (const auto& [relative, bytes] : after) {
+    const fs::path path = dir.path() / relative;
+    for (const std::string& view : bad.failed_views) {
+      EXPECT_EQ(relative.find(view + ".dispmvs"), std::string::npos) << relative;
+    }
+    if (path.extension() == ".bin" && relative.find("stereo") != std::string::npos) {
+      EXPECT_NO_THROW(colmap_io::ReadDenseArray(path)) << relative;
+    }
+    if (path.filename() == "fused.ply") EXPECT_NO_THROW(colmap_io::ReadPlyPoints(path));
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Matrix, BadInputTest, ::testing::ValuesIn(Cases()),
+                         [](const ::testing::TestParamInfo<BadInputCase>& info) {
+                           return info.param.name;
+                         });
+
+}  // namespace
+}  // namespace dispmvs
