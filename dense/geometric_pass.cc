@@ -29,10 +29,17 @@ PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
     }
     try {
       const fusion::DepthView ref = LoadDepthView(workspace, plan, reference, kPhotometricType);
+      // A source whose map cannot be read is left out, as fusion leaves it
+      // out: it fails its own view, not every view that lists it.
       std::vector<fusion::DepthView> sources;
       for (image_t source : problem.source_image_ids) {
-        if (fs::is_regular_file(PathsOf(workspace, plan.ImageOf(source).name, kPhotometricType).depth)) {
+        const std::string& source_name = plan.ImageOf(source).name;
+        if (!fs::is_regular_file(PathsOf(workspace, source_name, kPhotometricType).depth)) continue;
+        try {
           sources.push_back(LoadDepthView(workspace, plan, source, kPhotometricType));
+        } catch (const std::exception& error) {
+          log << "geometric: " << name << ": source " << source_name
+              << " left out: " << error.what() << '\n';
         }
       }
       std::vector<const fusion::DepthView*> source_pointers;

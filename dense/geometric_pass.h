@@ -16,7 +16,9 @@ namespace dispmvs::dense {
 
 // A reference in plan.min_consistent_views needs that many agreeing sources
 // instead of options.min_consistent_views. References without a photometric
-// map count as skipped_no_sources. Always recomputed (no resume): it is cheap
+// map count as skipped_no_sources; a reference whose own map cannot be read
+// fails, and a source whose map cannot be read is left out (with a line in
+// `log`) of the views that list it. Always recomputed (no resume): it is cheap
 // and depends on the neighbours' maps, which a later run may have added.
 PassSummary RunGeometricPass(const colmap_io::Workspace& workspace, const DensePlan& plan,
                              const fusion::GeometricFilterOptions& options, std::ostream& log);
