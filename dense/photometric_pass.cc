@@ -67,7 +67,9 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       plan, without_hint,
       DepthEstimator::CheckWeightsFile(options.estimator.model_path).needs_depth_range);
   DepthEstimator estimator(options.estimator);
-  log << "photometric: network " << estimator.Describe() << '\n' << std::flush;
+  log << "photometric: network " << estimator.Describe() << ", weights "
+      << options.estimator.model_path << '\n'
+      << std::flush;
   const auto compute_start = Clock::now();
   for (std::size_t i = 0; i < todo.size(); ++i) {
     const StereoProblem& problem = *todo[i];

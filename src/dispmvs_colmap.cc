@@ -35,6 +35,7 @@
 #include "dense/depth_estimator.h"
 #include "dense/workspace_maps.h"
 #include "src/program_main.h"
+#include "src/shipped_model.h"
 #include "src/program_options.h"
 
 namespace {
@@ -164,13 +165,8 @@ void Options::Check() const {
   }
 }
 
-#ifndef DISPMVS_DEFAULT_MODEL_PATH
-#define DISPMVS_DEFAULT_MODEL_PATH "models/dispmvs_small.safetensors"
-#endif
-
 std::optional<Options> ParseCommandLine(int argc, char** argv) {
   Options o;
-  o.photometric.estimator.model_path = DISPMVS_DEFAULT_MODEL_PATH;
   po::options_description description(kDescription);
   // clang-format off
   description.add_options()
@@ -179,10 +175,11 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "COLMAP dense workspace (required): the output folder of image_undistorter.")
       ("mode", po::value<std::string>(&o.mode)->default_value(o.mode),
        "full, photometric, fuse, export or plan (see above).")
-      ("model_path", po::value<std::string>(&o.photometric.estimator.model_path)
-           ->default_value(o.photometric.estimator.model_path),
-       "Network weights (.safetensors written by dispmvs_train); the default is the "
-       "model shipped in the source tree.")
+      ("model_path", po::value<std::string>(&o.photometric.estimator.model_path),
+       "Network weights (.safetensors written by dispmvs_train). Default: the shipped "
+       "model v2 weights, found beside the program (BIN/../share/dispmvs/models/"
+       "dispmvs_small.safetensors, where `cmake --install` puts them), else in the source "
+       "tree it was built from (models/).")
       ("max_image_size", po::value<int>(&o.photometric.max_image_size)->default_value(-1),
        "Downscale images whose larger side exceeds this (maps are written at that "
        "size, as PatchMatch does); -1 = full size.")
@@ -267,6 +264,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   o.min_num_consistent_given = !values["min_num_consistent"].defaulted();
   if (values.count("workspace_path") == 0) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
+  }
+  if (o.photometric.estimator.model_path.empty() &&
+      (o.mode == "full" || o.mode == "photometric")) {
+    o.photometric.estimator.model_path = cli::FindShippedModel().string();
   }
   o.Check();
   return o;
