@@ -16,6 +16,8 @@ packages=(
   libbenchmark-dev        # microbenchmarks in bench/
   colmap                  # the real peer in the interop tests
   unzip                   # bench/motorcycle_check.sh: the disparity inside scikit-image's .npz
+  clang libclang-rt-14-dev  # the fuzz ctest (tests/fuzz/): libFuzzer targets need clang and its
+                            # libFuzzer and sanitizer runtimes (Debian 12: clang 14)
 )
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq "${packages[@]}"

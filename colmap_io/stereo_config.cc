@@ -16,6 +16,8 @@ namespace {
 constexpr const char* kAutoKeyword = "__auto__";
 constexpr const char* kAllKeyword = "__all__";
 constexpr const char* kWhitespace = " \t\r\n\v\f";
+// The UTF-8 byte order mark, dropped from the start of a file by the readers.
+constexpr const char* kUtf8Bom = "\xEF\xBB\xBF";
 
 std::string Trim(const std::string& text) {
   const std::size_t begin = text.find_first_not_of(kWhitespace);
@@ -39,7 +41,7 @@ std::vector<ConfigLine> ReadMeaningfulLines(std::istream& in) {
   std::size_t number = 0;
   while (std::getline(in, line)) {
     ++number;
-    if (number == 1 && line.compare(0, 3, "\xEF\xBB\xBF") == 0) line.erase(0, 3);
+    if (number == 1 && line.compare(0, 3, kUtf8Bom) == 0) line.erase(0, 3);
     std::string text = Trim(line);
     if (text.empty() || text[0] == '#') continue;
     lines.push_back({number, std::move(text)});
@@ -143,6 +145,11 @@ std::string UnwritableNameReason(const std::string& name, bool in_comma_list) {
   if (name.find_first_of("\r\n") != std::string::npos) return "image name contains a line break";
   if (Trim(name) != name) return "image name has leading or trailing whitespace";
   if (name[0] == '#') return "image name starts with '#' (would read back as a comment)";
+  // On the first line the readers would drop the mark and read another name
+  // (or a comment, or nothing). Refused wherever it is, like '#'.
+  if (name.compare(0, 3, kUtf8Bom) == 0) {
+    return "image name starts with a UTF-8 byte order mark (would read back without it)";
+  }
   if (in_comma_list && name.find(',') != std::string::npos) {
     return "image name contains ',' (patch-match.cfg separates names with commas)";
   }

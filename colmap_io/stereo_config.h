@@ -73,7 +73,8 @@ std::vector<PatchMatchEntry> ReadPatchMatchConfig(const std::filesystem::path& p
 
 // Writes atomically in the format above. Throws IoError naming `path` when an
 // entry cannot be represented (empty name, a name with a comma, a line break,
-// surrounding whitespace or a leading '#', or an invalid SourceSpec).
+// surrounding whitespace, a leading '#' or a leading UTF-8 byte order mark, or
+// an invalid SourceSpec).
 void WritePatchMatchConfig(const std::vector<PatchMatchEntry>& entries,
                            const std::filesystem::path& path);
 

@@ -306,6 +306,31 @@ TEST(StereoConfigTest, FusionConfigWriteAndRoundTrip) {
   EXPECT_EQ(ReadFusionConfig(path), names);  // failed writes left it alone
 }
 
+// The readers drop a byte order mark from the start of the file, so a name
+// beginning with one cannot be written first: it would read back without the
+// mark (here "# a.jpg", a comment, and the entry would be lost). Such a name
+// can be read (the mark is only dropped at the very start), but the writers
+// refuse it instead of writing a file that reads back differently.
+TEST(StereoConfigTest, WritersRefuseANameStartingWithAByteOrderMark) {
+  TempDir dir;
+  const std::string marked = "\xEF\xBB\xBF# a.jpg";
+  std::istringstream fusion_in(" " + marked + "\nb.jpg\n");
+  const std::vector<std::string> names = ParseFusionConfig(fusion_in, "fusion.cfg");
+  ASSERT_EQ(names, (std::vector<std::string>{marked, "b.jpg"}));
+  const auto fusion_path = dir.path() / "fusion.cfg";
+  EXPECT_THROW(WriteFusionConfig(names, fusion_path), IoError);
+  EXPECT_FALSE(std::filesystem::exists(fusion_path));
+
+  const auto path = dir.path() / "patch-match.cfg";
+  EXPECT_THROW(WritePatchMatchConfig({{marked, SourceSpec::All()}}, path), IoError);
+  EXPECT_THROW(WritePatchMatchConfig({{"b.jpg", SourceSpec::Explicit({"c.jpg", marked})}}, path),
+               IoError);
+  EXPECT_FALSE(std::filesystem::exists(path));
+  // Elsewhere in a name the bytes are ordinary.
+  WriteFusionConfig({"b\xEF\xBB\xBF.jpg"}, fusion_path);
+  EXPECT_EQ(ReadFusionConfig(fusion_path), (std::vector<std::string>{"b\xEF\xBB\xBF.jpg"}));
+}
+
 // --- Resolving against a sparse model ----------------------------------------
 
 TEST(StereoConfigTest, ResolvesExplicitSourcesInListedOrder) {
