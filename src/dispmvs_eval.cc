@@ -12,8 +12,12 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <tuple>
+#include <utility>
 #include <vector>
 
+#include "eval/comparison_report.h"
+#include "eval/method_comparison.h"
 #include "eval/report.h"
 #include "eval/workspace_eval.h"
 #include "src/program_main.h"
@@ -29,6 +33,20 @@ constexpr const char* kDescription = R"(dispmvs_eval: depth-map and point-cloud 
 Usage: dispmvs_eval --workspace_path WS [--types T1,T2,...] [--ply FILE ...]
                     [--json OUT.json] [--tsv OUT.tsv] [--png_dir DIR] [--per_view]
                     [options]
+       dispmvs_eval --workspace_path WS --compare TYPE_A,TYPE_B
+                    [--compare_ply A.ply,B.ply] [--json OUT.json] [--per_view]
+
+Without ground truth (--compare), two methods' maps in one workspace, e.g.
+ours against PatchMatch's (dispmvs.geometric,geometric), per view and pooled
+over the pixels of the views both have: coverage of each; pixels both have;
+agreement, the shared pixels within 1 / 2 / 5 % of each other
+(2 |a - b| / (a + b)); and each method's own multi-view consistency, the
+share of its valid pixels that at least one source view's map of the same
+method agrees with (reprojection within 1 px and depth within 1 %, the test
+fusion applies; sources from patch-match.cfg, else __auto__, 4). With
+--compare_ply, the clouds too: mean distance A -> B and B -> A, and the
+shares of each within tau of the other, tau and the cut-off as fractions of
+B's bounding-box diagonal (--tau_rel, --cutoff_rel).
 
 WS is a COLMAP dense workspace (WS/sparse with PINHOLE or SIMPLE_PINHOLE
 cameras, WS/images, WS/stereo/depth_maps/NAME.TYPE.bin) with ground truth:
@@ -101,6 +119,8 @@ Options)";
 
 struct Options {
   std::string workspace_path;
+  std::string compare;      // "TYPE_A,TYPE_B": method against method, no ground truth
+  std::string compare_ply;  // "A.ply,B.ply"
   std::string types;
   std::string json_path;
   std::string tsv_path;
@@ -133,7 +153,12 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   description.add_options()
       ("help,h", "Print this help and exit.")
       ("workspace_path", po::value<std::string>(&o.workspace_path),
-       "Workspace with ground truth (required).")
+       "Workspace (required), with ground truth unless --compare.")
+      ("compare", po::value<std::string>(&o.compare),
+       "TYPE_A,TYPE_B: compare two methods' depth maps without ground truth (see above), "
+       "e.g. dispmvs.geometric,geometric for ours against PatchMatch's.")
+      ("compare_ply", po::value<std::string>(&o.compare_ply),
+       "A.ply,B.ply: with --compare, also the two fused clouds, each against the other.")
       ("types", po::value<std::string>(&o.types),
        "Comma-separated depth-map TYPEs, e.g. dispmvs.geometric,geometric; default: every "
        "TYPE found under WS/stereo/depth_maps. A TYPE without maps is reported as such.")
@@ -169,6 +194,17 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   if (values.count("workspace_path") == 0 || o.workspace_path.empty()) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
   }
+  if (values.count("compare_ply") > 0 && values.count("compare") == 0) {
+    throw std::invalid_argument("--compare_ply needs --compare");
+  }
+  if (values.count("compare") > 0) {
+    for (const char* other : {"types", "ply", "tsv", "png_dir"}) {
+      if (values.count(other) > 0 && !values[other].defaulted()) {
+        throw std::invalid_argument(std::string("--") + other +
+                                    " scores against ground truth; --compare does not use it");
+      }
+    }
+  }
   if (values.count("types") > 0) o.eval.types = SplitTypes(o.types);
   if (values.count("json") > 0 && o.json_path.empty()) {
     throw std::invalid_argument("--json needs a file name");
@@ -194,7 +230,39 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   return o;
 }
 
+// The list "A,B" of --compare or --compare_ply: exactly two entries.
+std::pair<std::string, std::string> SplitPair(const std::string& text, const char* option) {
+  std::vector<std::string> items;
+  try {
+    items = SplitTypes(text);
+  } catch (const std::invalid_argument&) {
+  }
+  if (items.size() != 2) {
+    throw std::invalid_argument(std::string("--") + option + " needs two entries A,B, got '" +
+                                text + "'");
+  }
+  return {items[0], items[1]};
+}
+
+int RunComparison(const Options& options) {
+  eval::MethodComparisonOptions compare;
+  std::tie(compare.type_a, compare.type_b) = SplitPair(options.compare, "compare");
+  if (!options.compare_ply.empty()) {
+    std::tie(compare.ply_a, compare.ply_b) = SplitPair(options.compare_ply, "compare_ply");
+  }
+  compare.tau_relative = options.eval.tau_relative;
+  compare.cutoff_relative = options.eval.cutoff_relative;
+  const eval::MethodComparison report = eval::CompareMethods(options.workspace_path, compare);
+  eval::PrintComparison(report, options.per_view, std::cout);
+  if (!options.json_path.empty()) {
+    eval::WriteComparisonJson(report, options.json_path);
+    std::cout << "json: " << options.json_path << '\n';
+  }
+  return 0;
+}
+
 int Run(const Options& options) {
+  if (!options.compare.empty()) return RunComparison(options);
   const eval::WorkspaceEvalReport report =
       eval::EvaluateWorkspace(options.workspace_path, options.eval);
   eval::PrintReport(report, options.per_view, std::cout);
