@@ -34,6 +34,7 @@
 #include "dense/plan.h"
 #include "dense/depth_estimator.h"
 #include "dense/workspace_maps.h"
+#include "eval/html_report.h"
 #include "src/program_main.h"
 #include "src/shipped_model.h"
 #include "src/program_options.h"
@@ -109,11 +110,13 @@ struct Options {
   std::string export_path;
   std::string image_list_path;
   std::string shard;  // "K/N"
+  bool no_report = false;
   int fusion_cache_mb = static_cast<int>(dense::kDefaultFusionCacheBytes / (1024 * 1024));
   // Whether --min_num_consistent was given: the default adapts to references
   // with fewer sources, a value the user chose does not
   // (dense::PlanMinConsistentViews).
   bool min_num_consistent_given = false;
+  std::string command_line;  // shown in the report
 
   void Check() const;
 };
@@ -253,6 +256,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Fusion reads each image's maps when it needs them and keeps at most this many MB "
        "of them (more only if one reference and its sources need it), so memory does not "
        "grow with the number of images.")
+      ("no_report", po::bool_switch(&o.no_report),
+       "Do not write WS/dispmvs_report.html, the run report (depth, normal and confidence "
+       "pictures per view beside PatchMatch's, coverage, the fused cloud; dispmvs_report "
+       "writes it for any workspace).")
       ("output_path", po::value<std::string>(&o.output_path),
        "Fused point cloud; default WS/fused.ply (its visibility goes to OUTPUT.vis).")
       ("export_path", po::value<std::string>(&o.export_path),
@@ -262,6 +269,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   po::variables_map values;
   if (!cli::ParseCommandLine(argc, argv, description, &values)) return std::nullopt;
   o.min_num_consistent_given = !values["min_num_consistent"].defaulted();
+  for (int i = 0; i < argc; ++i) o.command_line += (i > 0 ? " " : "") + std::string(argv[i]);
   if (values.count("workspace_path") == 0) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
   }
@@ -413,6 +421,14 @@ int Run(const Options& options) {
     if (fusion_summary->num_points == 0) {
       PrintEmptyCloudWarning(options, plan, *fusion_summary, ply);
     }
+  }
+  if (fusion_summary && !options.no_report) {
+    eval::HtmlReportOptions report;
+    report.ply_path = ply.string();
+    report.settings = options.command_line;
+    const fs::path report_path = workspace.root() / "dispmvs_report.html";
+    const eval::HtmlReportSummary written = eval::WriteHtmlReport(workspace.root(), report_path, report);
+    std::cout << "report: " << report_path.string() << " (" << written.bytes / 1024 << " KB)\n";
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

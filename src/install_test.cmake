@@ -12,7 +12,7 @@ execute_process(COMMAND "${CMAKE_COMMAND}" --install "${BUILD_DIR}" --prefix "${
 if(NOT status EQUAL 0)
   message(FATAL_ERROR "cmake --install failed (${status}): ${errors}")
 endif()
-foreach(file bin/dispmvs_colmap bin/dispmvs_eval bin/dispmvs_synth bin/dispmvs_train
+foreach(file bin/dispmvs_colmap bin/dispmvs_eval bin/dispmvs_report bin/dispmvs_synth bin/dispmvs_train
              bin/dispmvs_make_example share/dispmvs/models/dispmvs_small.safetensors
              share/dispmvs/models/dispmvs_small_paper.safetensors share/dispmvs/models/README.md)
   if(NOT EXISTS "${prefix}/${file}")
