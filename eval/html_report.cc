@@ -259,7 +259,10 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
     }
     html << "<tr><td class=\"name\">" << Escape(image->name);
     const fs::path image_path = workspace.ImagePath(image->name);
-    const cv::Mat picture = cv::imread(image_path.string(), cv::IMREAD_COLOR);
+    // Checked first: OpenCV warns on stderr about a file it cannot open.
+    const cv::Mat picture = fs::is_regular_file(image_path)
+                                ? cv::imread(image_path.string(), cv::IMREAD_COLOR)
+                                : cv::Mat();
     if (!picture.empty()) {
       page.Image(picture, width, image->name);
     } else {

@@ -427,8 +427,15 @@ int Run(const Options& options) {
     report.ply_path = ply.string();
     report.settings = options.command_line;
     const fs::path report_path = workspace.root() / "dispmvs_report.html";
-    const eval::HtmlReportSummary written = eval::WriteHtmlReport(workspace.root(), report_path, report);
-    std::cout << "report: " << report_path.string() << " (" << written.bytes / 1024 << " KB)\n";
+    // The report only shows what the run wrote: failing to write it (a full
+    // disk) is said, but does not fail the run.
+    try {
+      const eval::HtmlReportSummary written =
+          eval::WriteHtmlReport(workspace.root(), report_path, report);
+      std::cout << "report: " << report_path.string() << " (" << written.bytes / 1024 << " KB)\n";
+    } catch (const std::exception& error) {
+      std::cout << "warning: the run report was not written: " << error.what() << '\n';
+    }
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
