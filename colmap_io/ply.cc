@@ -77,18 +77,26 @@ uint64_t ParseVertexCount(const std::string& line, const std::string& source_nam
 
 }  // namespace
 
+void WritePlyHeader(uint64_t count, std::ostream& out) {
+  out << "ply\nformat binary_little_endian 1.0\nelement vertex " << count << "\n";
+  for (const char* property : kPropertyLines) out << property << "\n";
+  out << "end_header\n";
+}
+
+void AppendPlyRecord(const PlyPoint& point, std::string* record) {
+  for (float v : point.xyz) AppendFloat(v, record);
+  for (float v : point.normal) AppendFloat(v, record);
+  for (uint8_t v : point.rgb) record->push_back(static_cast<char>(v));
+}
+
 void WritePlyPoints(const std::vector<PlyPoint>& points, const std::filesystem::path& path) {
   WriteFileAtomically(path, [&](std::ostream& out) {
-    out << "ply\nformat binary_little_endian 1.0\nelement vertex " << points.size() << "\n";
-    for (const char* property : kPropertyLines) out << property << "\n";
-    out << "end_header\n";
+    WritePlyHeader(points.size(), out);
     std::string record;
     record.reserve(kPlyPointRecordBytes);
     for (const PlyPoint& point : points) {
       record.clear();
-      for (float v : point.xyz) AppendFloat(v, &record);
-      for (float v : point.normal) AppendFloat(v, &record);
-      for (uint8_t v : point.rgb) record.push_back(static_cast<char>(v));
+      AppendPlyRecord(point, &record);
       out.write(record.data(), static_cast<std::streamsize>(record.size()));
     }
   });

@@ -16,6 +16,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <ostream>
 #include <istream>
 #include <string>
 #include <vector>
@@ -34,6 +35,11 @@ struct PlyPoint {
 
 // Bytes of one record in the layout above.
 constexpr std::size_t kPlyPointRecordBytes = 6 * 4 + 3;
+
+// The header for `count` points, and one point's record, in the layout
+// above: for writers that stream points (fusion/fused_cloud_writer.h).
+void WritePlyHeader(uint64_t count, std::ostream& out);
+void AppendPlyRecord(const PlyPoint& point, std::string* record);
 
 // Writes atomically (atomic_file.h), creating parent directories; IoError
 // naming `path` on failure. An empty cloud is a valid file (N = 0).

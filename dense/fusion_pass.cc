@@ -15,9 +15,9 @@
 #include "colmap_io/stereo_config.h"
 #include "dense/pass_summary.h"
 #include "dense/workspace_maps.h"
+#include "fusion/fused_cloud_writer.h"
 #include "fusion/point_fusion.h"
 #include "fusion/view_cache.h"
-#include "fusion/vis_file.h"
 
 namespace dispmvs::dense {
 
@@ -99,16 +99,18 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
     }
   };
   fusion::FusionViewCache cache(load, max_cache_bytes);
-  const std::vector<fusion::FusedPoint> points =
-      fusion::FusePoints(static_cast<int>(view_images.size()), &cache, options);
-  fusion::WriteFusedPointCloud(points, ply_path);
+  // Points go to disk as they are made: memory does not grow with them.
+  fusion::FusedCloudWriter writer(ply_path);
+  fusion::FusePoints(static_cast<int>(view_images.size()), &cache, options,
+                     [&writer](fusion::FusedPoint&& point) { writer.Add(point); });
+  writer.Finish();
   FusionSummary summary;
-  summary.num_points = points.size();
+  summary.num_points = writer.size();
   summary.num_images = static_cast<int>(std::count(usable.begin(), usable.end(), true));
   summary.map_loads = cache.loads();
   summary.peak_cache_bytes = cache.peak_bytes();
   summary.seconds = SecondsSince(start);
-  log << "fusion: " << points.size() << " points from " << summary.num_images << " image(s) -> "
+  log << "fusion: " << summary.num_points << " points from " << summary.num_images << " image(s) -> "
       << ply_path.string() << " (+ .vis), " << FormatSeconds(summary.seconds) << "; "
       << summary.map_loads << " map loads, at most " << FormatMegabytes(summary.peak_cache_bytes)
       << " of maps held (--fusion_cache_mb " << max_cache_bytes / (1024 * 1024) << ")\n"

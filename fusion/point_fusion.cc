@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -152,6 +153,15 @@ std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
 
 std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
                                    const GeometricFilterOptions& options, FusionStats* stats) {
+  std::vector<FusedPoint> points;
+  FusePoints(
+      num_views, cache, options, [&points](FusedPoint&& point) { points.push_back(std::move(point)); },
+      stats);
+  return points;
+}
+
+void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOptions& options,
+                const PointSink& emit, FusionStats* stats) {
   options.Check();
   const auto count = static_cast<std::size_t>(std::max(num_views, 0));
   // Per-view state that outlives the cached maps: what has been consumed
@@ -173,7 +183,6 @@ std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
     stats->consumed_pixels_per_view.assign(count, 0);
   }
 
-  std::vector<FusedPoint> points;
   std::vector<PairConsistency> pairs;
   std::vector<std::pair<int, std::shared_ptr<const FusionView>>> sources;
   std::array<PairConsistency::Match, kMaxSourceViews> matches;
@@ -224,12 +233,11 @@ std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
           consumed[source][static_cast<std::size_t>(match.row) * source_view.geometry.depth.width() +
                            match.col] = 1;
         }
-        points.push_back(sum.Finish());
+        emit(sum.Finish());
         if (stats != nullptr) ++stats->points_per_view[v];
       }
     }
   }
-  return points;
 }
 
 }  // namespace dispmvs::fusion

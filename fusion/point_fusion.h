@@ -9,6 +9,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <opencv2/core.hpp>
 #include <vector>
 
@@ -83,5 +84,12 @@ class FusionViewCache;  // fusion/view_cache.h
 std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
                                    const GeometricFilterOptions& options,
                                    FusionStats* stats = nullptr);
+
+// The same, each point handed to `emit` as soon as it is made, in the same
+// order, instead of collected (fusion/fused_cloud_writer.h writes them out),
+// so that memory does not grow with the number of points either.
+using PointSink = std::function<void(FusedPoint&&)>;
+void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOptions& options,
+                const PointSink& emit, FusionStats* stats = nullptr);
 
 }  // namespace dispmvs::fusion

@@ -6,6 +6,7 @@
 #include "colmap_io/atomic_file.h"
 #include "colmap_io/error.h"
 #include "colmap_io/ply.h"
+#include "fusion/fused_cloud_writer.h"
 
 namespace dispmvs::fusion {
 namespace {
@@ -135,19 +136,9 @@ std::vector<std::vector<uint32_t>> ReadVisibilityFile(const std::filesystem::pat
 
 void WriteFusedPointCloud(const std::vector<FusedPoint>& points,
                           const std::filesystem::path& ply_path) {
-  std::vector<colmap_io::PlyPoint> ply_points(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const FusedPoint& point = points[i];
-    colmap_io::PlyPoint& out = ply_points[i];
-    const bool normal_finite = point.normal.allFinite();
-    for (int c = 0; c < 3; ++c) {
-      out.xyz[c] = point.xyz[c];
-      out.normal[c] = normal_finite ? point.normal[c] : 0.0f;
-    }
-    out.rgb = point.rgb;
-  }
-  WriteVisibilityFile(points, std::filesystem::path(ply_path.string() + ".vis"));
-  colmap_io::WritePlyPoints(ply_points, ply_path);
+  FusedCloudWriter writer(ply_path);
+  for (const FusedPoint& point : points) writer.Add(point);
+  writer.Finish();
 }
 
 }  // namespace dispmvs::fusion

@@ -2,12 +2,14 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "colmap_io/error.h"
 #include "colmap_io/ply.h"
+#include "fusion/fused_cloud_writer.h"
 #include "tests/support/temp_dir.h"
 
 namespace dispmvs::fusion {
@@ -148,6 +150,44 @@ TEST(VisFileTest, StreamErrorsNameTheSource) {
   } catch (const colmap_io::IoError& e) {
     EXPECT_EQ(e.path(), "my-source");
   }
+}
+
+// The streaming writer behind WriteFusedPointCloud: identical files for a
+// cloud larger than its 1 MB buffers, its body files gone afterwards, and
+// nothing under the final names when it is dropped before Finish().
+TEST(FusedCloudWriterTest, StreamsTheSameFilesAndLeavesNothingBehind) {
+  TempDir dir;
+  std::vector<FusedPoint> points;
+  for (uint32_t i = 0; i < 60000; ++i) {
+    points.push_back(PointWith({i % 5, i, i + 7}));
+    points.back().xyz = Eigen::Vector3f(static_cast<float>(i), 0.5f, -1.0f);
+  }
+  const auto ply = dir.path() / "fused.ply";
+  {
+    FusedCloudWriter writer(ply);
+    for (const FusedPoint& point : points) writer.Add(point);
+    EXPECT_EQ(writer.size(), points.size());
+    writer.Finish();
+  }
+  const std::vector<colmap_io::PlyPoint> read = colmap_io::ReadPlyPoints(ply);
+  ASSERT_EQ(read.size(), points.size());
+  EXPECT_EQ(read[59999].xyz[0], 59999.0f);
+  const auto visibility = ReadVisibilityFile(dir.path() / "fused.ply.vis");
+  ASSERT_EQ(visibility.size(), points.size());
+  EXPECT_EQ(visibility[12345], points[12345].visibility);
+  std::size_t files = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir.path())) {
+    (void)entry;
+    ++files;
+  }
+  EXPECT_EQ(files, 2u);  // fused.ply and fused.ply.vis only
+
+  TempDir dropped;
+  {
+    FusedCloudWriter writer(dropped.path() / "fused.ply");
+    writer.Add(points[0]);
+  }
+  EXPECT_TRUE(std::filesystem::is_empty(dropped.path()));
 }
 
 }  // namespace
