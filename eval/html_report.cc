@@ -246,10 +246,19 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
   }
   html << "</tr>\n";
   const int width = options.thumbnail_width;
+  int without_maps = 0;
   for (const auto* image : images) {
     std::vector<std::optional<DenseArray>> ours, theirs;
     for (const MapType& type : kOurTypes) ours.push_back(ReadIfPresent(workspace.DepthMapPath(image->name, type.type)));
     for (const MapType& type : kPatchMatchTypes) theirs.push_back(ReadIfPresent(workspace.DepthMapPath(image->name, type.type)));
+    bool any_map = false;
+    for (const auto* maps : {&ours, &theirs}) {
+      for (const auto& map : *maps) any_map = any_map || map.has_value();
+    }
+    if (!any_map) {  // e.g. a source that is no reference: nothing to show
+      ++without_maps;
+      continue;
+    }
     // The view's colour scale: our photometric map's, else the first map's.
     std::optional<DepthRange> range;
     for (const auto* maps : {&ours, &theirs}) {
@@ -312,7 +321,12 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
     }
     html << "</tr>\n";
   }
-  html << "</table>\n</body></html>\n";
+  html << "</table>\n";
+  if (without_maps > 0) {
+    html << "<p>" << without_maps << " registered image(s) without any depth map are not "
+         << "listed.</p>\n";
+  }
+  html << "</body></html>\n";
 
   const std::string text = html.str();
   colmap_io::WriteFileAtomically(html_path, [&](std::ostream& out) { out << text; });

@@ -123,12 +123,18 @@ TEST_F(HtmlReportTest, PatchMatchMapsAndTheCloudWhenPresent) {
     cloud[i].rgb = {200, 100, 50};
   }
   colmap_io::WritePlyPoints(cloud, root_ / "fused.ply");
+  std::filesystem::remove(workspace.DepthMapPath("view_06.png", "dispmvs.photometric"));
   HtmlReportOptions options;
   options.cloud_view_size = 200;
   const fs::path html_path = dir_.path() / "report.html";
   const HtmlReportSummary summary = WriteHtmlReport(root_, html_path, options);
   const std::string html = ::dispmvs::testing::ReadFileBytes(html_path);
-  EXPECT_EQ(summary.embedded_images, 3 + 7 * 4 + 1);  // cloud views, per view, PatchMatch's map
+  // Cloud views; per view with maps (view_06 has none left): image, bar,
+  // depth, confidence; PatchMatch's map of view_03.
+  EXPECT_EQ(summary.embedded_images, 3 + 6 * 4 + 1);
+  EXPECT_NE(html.find("1 registered image(s) without any depth map are not listed"),
+            std::string::npos);
+  EXPECT_EQ(html.find("view_06.png"), std::string::npos);
   EXPECT_NE(html.find("PatchMatch geometric"), std::string::npos);
   EXPECT_NE(html.find("320x240, 50.0%"), std::string::npos);
   EXPECT_NE(html.find("500 points"), std::string::npos);
