@@ -65,6 +65,17 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
     view_of[image_id] = static_cast<int>(view_images.size());
     view_images.push_back(image_id);
   }
+  // Each view's sources, known from the plan before any map is read, so
+  // that fusion can free what it keeps per view after the view's last use.
+  std::vector<std::vector<int>> sources_of(view_images.size());
+  for (std::size_t v = 0; v < view_images.size(); ++v) {
+    const auto problem = problem_of.find(view_images[v]);
+    if (problem == problem_of.end()) continue;
+    for (image_t source : problem->second->source_image_ids) {
+      const auto source_view = view_of.find(source);
+      if (source_view != view_of.end()) sources_of[v].push_back(source_view->second);
+    }
+  }
   std::vector<bool> usable(view_images.size(), false);
   auto load = [&](int index) -> std::shared_ptr<const fusion::FusionView> {
     const image_t image_id = view_images[static_cast<std::size_t>(index)];
@@ -84,13 +95,7 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
       if (lowered != plan.min_consistent_views.end()) {
         view->min_consistent_views = lowered->second;
       }
-      const auto problem = problem_of.find(image_id);
-      if (problem != problem_of.end()) {
-        for (image_t source : problem->second->source_image_ids) {
-          const auto source_view = view_of.find(source);
-          if (source_view != view_of.end()) view->source_views.push_back(source_view->second);
-        }
-      }
+      view->source_views = sources_of[static_cast<std::size_t>(index)];
       usable[static_cast<std::size_t>(index)] = true;
       return view;
     } catch (const std::exception& error) {
@@ -102,7 +107,8 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
   // Points go to disk as they are made: memory does not grow with them.
   fusion::FusedCloudWriter writer(ply_path);
   fusion::FusePoints(static_cast<int>(view_images.size()), &cache, options,
-                     [&writer](fusion::FusedPoint&& point) { writer.Add(point); });
+                     [&writer](fusion::FusedPoint&& point) { writer.Add(point); }, nullptr,
+                     fusion::LastUses(sources_of));
   writer.Finish();
   FusionSummary summary;
   summary.num_points = writer.size();

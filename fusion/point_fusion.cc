@@ -160,17 +160,47 @@ std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
   return points;
 }
 
+std::vector<int> LastUses(const std::vector<std::vector<int>>& sources) {
+  std::vector<int> last(sources.size());
+  for (std::size_t v = 0; v < sources.size(); ++v) {
+    last[v] = std::max(last[v], static_cast<int>(v));
+    for (int source : sources[v]) {
+      if (source >= 0 && static_cast<std::size_t>(source) < last.size()) {
+        last[static_cast<std::size_t>(source)] =
+            std::max(last[static_cast<std::size_t>(source)], static_cast<int>(v));
+      }
+    }
+  }
+  return last;
+}
+
 void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOptions& options,
-                const PointSink& emit, FusionStats* stats) {
+                const PointSink& emit, FusionStats* stats, const std::vector<int>& last_use) {
   options.Check();
   const auto count = static_cast<std::size_t>(std::max(num_views, 0));
+  if (!last_use.empty() && last_use.size() != count) {
+    throw std::invalid_argument("FusePoints: last_use must have one entry per view");
+  }
+  // Views to free after each reference.
+  std::vector<std::vector<std::size_t>> released_after(count);
+  for (std::size_t v = 0; v < last_use.size(); ++v) {
+    const int last = last_use[v];
+    if (last >= 0 && static_cast<std::size_t>(last) < count) {
+      released_after[static_cast<std::size_t>(last)].push_back(v);
+    }
+  }
+  std::vector<bool> released(count, false);
   // Per-view state that outlives the cached maps: what has been consumed
   // (one byte per pixel, made when the view is first loaded) and the frame.
   std::vector<std::vector<uint8_t>> consumed(count);
   std::vector<std::optional<ViewFrame>> frames(count);
   auto get = [&](int index) {
-    std::shared_ptr<const FusionView> view = cache->Get(index);
     const auto i = static_cast<std::size_t>(index);
+    if (i < count && released[i]) {
+      throw std::logic_error("FusePoints: view " + std::to_string(index) +
+                             " used after its last use");
+    }
+    std::shared_ptr<const FusionView> view = cache->Get(index);
     if (view != nullptr && !frames[i]) {
       ValidateView(*view, i, count);
       frames[i].emplace(view->geometry);
@@ -183,13 +213,24 @@ void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOpti
     stats->consumed_pixels_per_view.assign(count, 0);
   }
 
+  // Frees the masks of the views whose last use was reference v.
+  auto release = [&](std::size_t v) {
+    for (std::size_t done : released_after[v]) {
+      std::vector<uint8_t>().swap(consumed[done]);
+      released[done] = true;
+    }
+  };
+
   std::vector<PairConsistency> pairs;
   std::vector<std::pair<int, std::shared_ptr<const FusionView>>> sources;
   std::array<PairConsistency::Match, kMaxSourceViews> matches;
   std::array<bool, kMaxSourceViews> agrees{};
   for (std::size_t v = 0; v < count; ++v) {
     const std::shared_ptr<const FusionView> reference_view = get(static_cast<int>(v));
-    if (reference_view == nullptr) continue;  // left out
+    if (reference_view == nullptr) {  // left out
+      release(v);
+      continue;
+    }
     const FusionView& reference = *reference_view;
     const int min_consistent = reference.min_consistent_views >= 0
                                    ? reference.min_consistent_views
@@ -237,6 +278,7 @@ void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOpti
         if (stats != nullptr) ++stats->points_per_view[v];
       }
     }
+    release(v);
   }
 }
 

@@ -88,8 +88,17 @@ std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
 // The same, each point handed to `emit` as soon as it is made, in the same
 // order, instead of collected (fusion/fused_cloud_writer.h writes them out),
 // so that memory does not grow with the number of points either.
+// `last_use`, if not empty, gives for each view the last reference (view
+// index) that uses it, as itself or as a source (LastUses below): the view's
+// one byte per pixel is then freed after that reference, and memory does not
+// grow with the number of views at all. A view asked for after its last use
+// is a std::logic_error.
 using PointSink = std::function<void(FusedPoint&&)>;
 void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOptions& options,
-                const PointSink& emit, FusionStats* stats = nullptr);
+                const PointSink& emit, FusionStats* stats = nullptr,
+                const std::vector<int>& last_use = {});
+
+// last_use for FusePoints: sources[v] lists the source views of view v.
+std::vector<int> LastUses(const std::vector<std::vector<int>>& sources);
 
 }  // namespace dispmvs::fusion

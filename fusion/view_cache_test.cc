@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <memory>
+#include <stdexcept>
 #include <vector>
 
 #include "fusion/point_fusion.h"
@@ -120,6 +121,33 @@ TEST(FusionViewCacheTest, FusionFromATightCacheGivesTheSamePoints) {
     ASSERT_EQ(cached[i].visibility, all[i].visibility) << i;
   }
   EXPECT_EQ(cached_stats.points_per_view, all_stats.points_per_view);
+  // Freeing each view's consumed mask after its last use changes nothing;
+  // announcing a last use too early is caught.
+  std::vector<std::vector<int>> sources;
+  for (const FusionView& view : views) sources.push_back(view.source_views);
+  const std::vector<int> last_use = LastUses(sources);
+  EXPECT_EQ(last_use, (std::vector<int>{2, 3, 4, 5, 6, 7, 7, 7}));
+  FusionViewCache freeing_cache(
+      [&](int index) {
+        return std::make_shared<const FusionView>(views[static_cast<std::size_t>(index)]);
+      },
+      5 * FusionViewCache::BytesOf(views[0]));
+  std::vector<FusedPoint> freed;
+  FusePoints(static_cast<int>(views.size()), &freeing_cache, options,
+             [&freed](FusedPoint&& point) { freed.push_back(std::move(point)); }, nullptr,
+             last_use);
+  ASSERT_EQ(freed.size(), all.size());
+  for (std::size_t i = 0; i < all.size(); ++i) ASSERT_EQ(freed[i].xyz, all[i].xyz) << i;
+  std::vector<int> too_early = last_use;
+  too_early[3] = 2;  // view 3 is still a source of references 4 and 5
+  FusionViewCache again(
+      [&](int index) {
+        return std::make_shared<const FusionView>(views[static_cast<std::size_t>(index)]);
+      },
+      5 * FusionViewCache::BytesOf(views[0]));
+  EXPECT_THROW(FusePoints(static_cast<int>(views.size()), &again, options,
+                          [](FusedPoint&&) {}, nullptr, too_early),
+               std::logic_error);
   EXPECT_EQ(cached_stats.consumed_pixels_per_view, all_stats.consumed_pixels_per_view);
   EXPECT_LE(cache.peak_bytes(), 5 * view_bytes);
   // References in order, sources their neighbours: each view is loaded once.
