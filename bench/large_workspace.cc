@@ -15,6 +15,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "colmap_io/atomic_file.h"
+#include "colmap_io/camera_models.h"
 #include "colmap_io/dense_array.h"
 #include "colmap_io/error.h"
 #include "colmap_io/sparse_model.h"
@@ -29,7 +30,6 @@ namespace fs = std::filesystem;
 using colmap_io::image_t;
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr int kPinholeModelId = 1;
 // Colour is averaged over kSupersampling^2 rays per pixel, so that the finest
 // texture cells (a few pixels wide) do not alias differently in each view.
 constexpr int kSupersampling = 2;
@@ -408,7 +408,7 @@ LargeWorkspaceSummary WriteLargeWorkspace(const fs::path& dir, const LargeWorksp
   colmap_io::SparseModel model;
   colmap_io::Camera camera;
   camera.camera_id = 1;
-  camera.model_id = kPinholeModelId;
+  camera.model_id = colmap_io::kPinholeModelId;
   camera.width = static_cast<uint64_t>(options.width);
   camera.height = static_cast<uint64_t>(options.height);
   camera.params = rig.Params();
