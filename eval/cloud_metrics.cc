@@ -165,6 +165,20 @@ CloudMetrics EvaluateCloudBruteForce(const PointCloud& reconstruction, const Poi
   return Combine(nearest(reconstruction, gt), nearest(gt, reconstruction), options);
 }
 
+int64_t AppendFinitePoints(const std::vector<colmap_io::PlyPoint>& ply, PointCloud* cloud) {
+  int64_t dropped = 0;
+  cloud->reserve(cloud->size() + ply.size());
+  for (const colmap_io::PlyPoint& p : ply) {
+    const Eigen::Vector3f xyz(p.xyz[0], p.xyz[1], p.xyz[2]);
+    if (xyz.allFinite()) {
+      cloud->push_back(xyz);
+    } else {
+      ++dropped;
+    }
+  }
+  return dropped;
+}
+
 double BoundingBoxDiagonal(const PointCloud& points) {
   if (points.empty()) return 0;
   Eigen::Vector3d low = points.front().cast<double>();

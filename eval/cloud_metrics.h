@@ -23,6 +23,7 @@
 #include <Eigen/Core>
 
 #include "colmap_io/dense_array.h"
+#include "colmap_io/ply.h"
 #include "colmap_io/sparse_model.h"
 
 namespace dispmvs::eval {
@@ -78,6 +79,10 @@ CloudMetrics EvaluateCloud(const NearestNeighbourIndex& reconstruction,
 // small clouds.
 CloudMetrics EvaluateCloudBruteForce(const PointCloud& reconstruction, const PointCloud& gt,
                                      const CloudMetricOptions& options);
+
+// Appends the finite points of `ply` to `cloud` (the k-d tree cannot hold
+// the others); returns how many were dropped.
+int64_t AppendFinitePoints(const std::vector<colmap_io::PlyPoint>& ply, PointCloud* cloud);
 
 // Length of the diagonal of the axis-aligned bounding box; 0 when empty.
 double BoundingBoxDiagonal(const PointCloud& points);

@@ -157,25 +157,13 @@ std::map<image_t, std::vector<image_t>> SourcesOf(const Workspace& workspace,
   return sources;
 }
 
-PointCloud ReadCloud(const std::string& path, int64_t* dropped) {
-  PointCloud cloud;
-  for (const PlyPoint& p : ReadPlyPoints(path)) {
-    const Eigen::Vector3f xyz(p.xyz[0], p.xyz[1], p.xyz[2]);
-    if (xyz.allFinite()) {
-      cloud.push_back(xyz);
-    } else {
-      ++*dropped;
-    }
-  }
-  return cloud;
-}
-
 CloudComparison CompareClouds(const MethodComparisonOptions& options) {
   CloudComparison result;
   result.ply_a = options.ply_a;
   result.ply_b = options.ply_b;
-  PointCloud a = ReadCloud(options.ply_a, &result.nonfinite_dropped_a);
-  PointCloud b = ReadCloud(options.ply_b, &result.nonfinite_dropped_b);
+  PointCloud a, b;
+  result.nonfinite_dropped_a = AppendFinitePoints(ReadPlyPoints(options.ply_a), &a);
+  result.nonfinite_dropped_b = AppendFinitePoints(ReadPlyPoints(options.ply_b), &b);
   if (b.empty()) throw IoError(options.ply_b, "the point cloud has no (finite) point");
   const double diagonal = BoundingBoxDiagonal(b);
   CloudMetricOptions metric_options;

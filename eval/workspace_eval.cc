@@ -23,21 +23,6 @@ std::string SizeText(uint64_t width, uint64_t height) {
   return std::to_string(width) + "x" + std::to_string(height);
 }
 
-// Drops non-finite points (the k-d tree cannot hold them); returns how many.
-int64_t ToCloud(const std::vector<colmap_io::PlyPoint>& ply, PointCloud* cloud) {
-  int64_t dropped = 0;
-  cloud->reserve(cloud->size() + ply.size());
-  for (const colmap_io::PlyPoint& p : ply) {
-    const Eigen::Vector3f xyz(p.xyz[0], p.xyz[1], p.xyz[2]);
-    if (xyz.allFinite()) {
-      cloud->push_back(xyz);
-    } else {
-      ++dropped;
-    }
-  }
-  return dropped;
-}
-
 colmap_io::DenseArray ReadDepthMap(const fs::path& path, const char* what) {
   colmap_io::DenseArray map = colmap_io::ReadDenseArray(path);
   if (map.channels() != 1) {
@@ -297,7 +282,7 @@ void EvaluateClouds(const colmap_io::Workspace& workspace, const fs::path& gt_di
     info.source = "ground-truth depth maps (stride " + std::to_string(options.gt_stride) + ")";
   } else {
     info.source = gt_cloud_path.string();
-    info.nonfinite_dropped = ToCloud(colmap_io::ReadPlyPoints(gt_cloud_path), &gt_cloud);
+    info.nonfinite_dropped = AppendFinitePoints(colmap_io::ReadPlyPoints(gt_cloud_path), &gt_cloud);
   }
   if (gt_cloud.empty()) {
     throw IoError(gt_from_maps ? gt_dir.string() : gt_cloud_path.string(),
@@ -320,7 +305,7 @@ void EvaluateClouds(const colmap_io::Workspace& workspace, const fs::path& gt_di
     CloudResult result;
     result.ply_path = ply;
     PointCloud points;
-    result.nonfinite_dropped = ToCloud(colmap_io::ReadPlyPoints(ply), &points);
+    result.nonfinite_dropped = AppendFinitePoints(colmap_io::ReadPlyPoints(ply), &points);
     const NearestNeighbourIndex index(std::move(points));
     result.metrics = EvaluateCloud(index, gt_index, info.thresholds);
     report->clouds.push_back(std::move(result));

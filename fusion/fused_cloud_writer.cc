@@ -8,6 +8,7 @@
 #include "colmap_io/atomic_file.h"
 #include "colmap_io/error.h"
 #include "colmap_io/ply.h"
+#include "fusion/vis_file.h"
 
 namespace dispmvs::fusion {
 
@@ -16,10 +17,6 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr std::size_t kFlushBytes = 1 << 20;
-
-void AppendLittleEndian(uint64_t value, int num_bytes, std::string* out) {
-  for (int i = 0; i < num_bytes; ++i) out->push_back(static_cast<char>((value >> (8 * i)) & 0xFFu));
-}
 
 // Appends the body file at `path` to `out`.
 void CopyBody(const fs::path& path, std::ostream& out) {
@@ -64,8 +61,7 @@ void FusedCloudWriter::Add(const FusedPoint& point) {
   if (point.visibility.size() > std::numeric_limits<uint32_t>::max()) {
     throw colmap_io::IoError(vis_path_.string(), "a point has too many visible images");
   }
-  AppendLittleEndian(point.visibility.size(), 4, &vis_buffer_);
-  for (uint32_t image : point.visibility) AppendLittleEndian(image, 4, &vis_buffer_);
+  AppendVisibilityRecord(point.visibility, &vis_buffer_);
   ++count_;
   if (ply_buffer_.size() + vis_buffer_.size() >= kFlushBytes) Flush();
 }
@@ -88,7 +84,7 @@ void FusedCloudWriter::Finish() {
   }
   colmap_io::WriteFileAtomically(vis_path_, [&](std::ostream& out) {
     std::string count;
-    AppendLittleEndian(count_, 8, &count);
+    AppendVisibilityHeader(count_, &count);
     out.write(count.data(), static_cast<std::streamsize>(count.size()));
     if (count_ > 0) CopyBody(vis_body_path_, out);
   });

@@ -139,9 +139,8 @@ struct Accumulator {
 
 std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
                                    const GeometricFilterOptions& options, FusionStats* stats) {
-  options.Check();
-  for (std::size_t v = 0; v < views.size(); ++v) ValidateView(views[v], v, views.size());
-  // The caller holds every view already: the cache only lends them out.
+  // The caller holds every view already: the cache only lends them out. Each
+  // view is checked when first lent (every view is, as a reference in turn).
   FusionViewCache cache(
       [&views](int index) {
         return std::shared_ptr<const FusionView>(&views[static_cast<std::size_t>(index)],

@@ -66,19 +66,27 @@ class VisReader {
 
 }  // namespace
 
+void AppendVisibilityHeader(uint64_t num_points, std::string* out) {
+  AppendLittleEndian(num_points, 8, out);
+}
+
+void AppendVisibilityRecord(const std::vector<uint32_t>& images, std::string* out) {
+  AppendLittleEndian(images.size(), 4, out);
+  for (uint32_t image : images) AppendLittleEndian(image, 4, out);
+}
+
 void WriteVisibilityFile(const std::vector<FusedPoint>& points,
                          const std::filesystem::path& path) {
   colmap_io::WriteFileAtomically(path, [&](std::ostream& out) {
     std::string buffer;
-    AppendLittleEndian(points.size(), 8, &buffer);
+    AppendVisibilityHeader(points.size(), &buffer);
     // Written in chunks to keep memory flat on large clouds.
     constexpr std::size_t kFlushBytes = 1 << 20;
     for (const FusedPoint& point : points) {
       if (point.visibility.size() > std::numeric_limits<uint32_t>::max()) {
         throw colmap_io::IoError(path.string(), "a point has too many visible images");
       }
-      AppendLittleEndian(point.visibility.size(), 4, &buffer);
-      for (uint32_t image : point.visibility) AppendLittleEndian(image, 4, &buffer);
+      AppendVisibilityRecord(point.visibility, &buffer);
       if (buffer.size() >= kFlushBytes) {
         out.write(buffer.data(), static_cast<std::streamsize>(buffer.size()));
         buffer.clear();

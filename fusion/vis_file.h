@@ -19,6 +19,12 @@
 
 namespace dispmvs::fusion {
 
+// Pieces of the layout above, appended to `out`: the point count, and one
+// point's list (at most 2^32 - 1 images; the caller checks), for writers
+// that stream points (fused_cloud_writer.h).
+void AppendVisibilityHeader(uint64_t num_points, std::string* out);
+void AppendVisibilityRecord(const std::vector<uint32_t>& images, std::string* out);
+
 // Writes the visibility lists of `points` atomically (colmap_io/atomic_file.h),
 // creating parent directories. Throws colmap_io::IoError naming `path`.
 void WriteVisibilityFile(const std::vector<FusedPoint>& points,

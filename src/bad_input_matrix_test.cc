@@ -36,6 +36,7 @@
 #include "examples/example_workspace.h"
 #include "tests/support/run_program.h"
 #include "tests/support/temp_dir.h"
+#include "tests/support/workspace_outputs.h"
 
 namespace dispmvs {
 namespace {
@@ -394,18 +395,6 @@ std::vector<BadInputCase> Cases() {
   return cases;
 }
 
-// Every file under `root` that is not a temporary one; relative path -> bytes.
-std::map<std::string, std::string> Files(const fs::path& root) {
-  std::map<std::string, std::string> files;
-  for (const auto& entry : fs::recursive_directory_iterator(root)) {
-    if (!entry.is_regular_file()) continue;
-    if (entry.path().filename().string().find(".tmp-") != std::string::npos) continue;
-    const std::string relative = fs::relative(entry.path(), root).string();
-    if (relative.find("dispmvs_claims") != std::string::npos) continue;  // locks, not outputs
-    files[relative] = ReadFileBytes(entry.path());
-  }
-  return files;
-}
 
 std::string Substitute(std::string text, const fs::path& ws, const fs::path& dir) {
   for (const auto& [key, value] : {std::pair<std::string, std::string>{"{WS}", ws.string()},
@@ -459,7 +448,7 @@ TEST_P(BadInputTest, ExitStatusMessageAndNothingPartial) {
     examples::WriteExampleWorkspace(ws, example);
   }
   bad.breaks(ws);
-  const auto before = Files(dir.path());
+  const auto before = testing::FinalOutputs(dir.path());
   const std::string program =
       bad.program == Program::kColmap ? DISPMVS_COLMAP_PROGRAM : DISPMVS_EVAL_PROGRAM;
   if (bad.needs_non_root && ::geteuid() == 0) {
@@ -491,7 +480,7 @@ TEST_P(BadInputTest, ExitStatusMessageAndNothingPartial) {
   if (!run.err.empty()) {  // the error convention: one line
     EXPECT_EQ(run.err.find('\n'), run.err.size() - 1) << run.err;
   }
-  const auto after = Files(dir.path());
+  const auto after = testing::FinalOutputs(dir.path());
   if (bad.written == Written::kNothing) {
     EXPECT_EQ(Changed(before, after), std::vector<std::string>{});
     return;

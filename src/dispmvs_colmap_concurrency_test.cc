@@ -20,6 +20,7 @@
 #include "examples/example_workspace.h"
 #include "tests/support/temp_dir.h"
 #include "tests/support/watched_process.h"
+#include "tests/support/workspace_outputs.h"
 
 namespace dispmvs {
 namespace {
@@ -28,17 +29,11 @@ namespace fs = std::filesystem;
 using testing::TempDir;
 using testing::WatchedProcess;
 
-// Outputs under their final names (claim locks, which hold pids, and the
-// report, which names the workspace, left out).
+// Outputs under their final names, without the report (it names the
+// workspace's path, which differs between the runs compared).
 std::map<std::string, std::string> Outputs(const fs::path& root) {
-  std::map<std::string, std::string> files;
-  for (const auto& entry : fs::recursive_directory_iterator(root)) {
-    if (!entry.is_regular_file()) continue;
-    const std::string relative = fs::relative(entry.path(), root).string();
-    if (relative.find("dispmvs_claims") != std::string::npos) continue;
-    if (relative == "dispmvs_report.html") continue;  // names the workspace's path
-    files[relative] = testing::ReadFileBytes(entry.path());
-  }
+  std::map<std::string, std::string> files = testing::FinalOutputs(root);
+  files.erase("dispmvs_report.html");
   return files;
 }
 

@@ -28,6 +28,7 @@
 #include "fusion/vis_file.h"
 #include "tests/support/temp_dir.h"
 #include "tests/support/watched_process.h"
+#include "tests/support/workspace_outputs.h"
 
 namespace dispmvs {
 namespace {
@@ -37,25 +38,11 @@ using testing::TempDir;
 using testing::WatchedProcess;
 using Seconds = std::chrono::duration<double>;
 
-bool IsTemporary(const fs::path& path) {
-  return path.filename().string().find(".tmp-") != std::string::npos;
-}
-
-// Every output a run leaves under its final name (temporary files, the
-// claim locks, which hold pids, and the report, which names the workspace,
-// left out); relative path -> bytes. Links
-// (the exported workspace's images/ and sparse/) are not followed.
+// Every output a run leaves under its final name, without the report (it
+// names the workspace's path, which differs between the runs compared).
 std::map<std::string, std::string> FinalFiles(const fs::path& root) {
-  std::map<std::string, std::string> files;
-  for (const auto& entry : fs::recursive_directory_iterator(root)) {
-    if (entry.is_symlink()) continue;
-    if (!entry.is_regular_file() || IsTemporary(entry.path())) continue;
-    const std::string relative = fs::relative(entry.path(), root).string();
-    if (relative.find("dispmvs_claims") != std::string::npos) continue;
-    // The report names the workspace's path, which differs between runs.
-    if (relative == "dispmvs_report.html") continue;
-    files[relative] = testing::ReadFileBytes(entry.path());
-  }
+  std::map<std::string, std::string> files = testing::FinalOutputs(root);
+  files.erase("dispmvs_report.html");
   return files;
 }
 
@@ -63,9 +50,8 @@ std::map<std::string, std::string> FinalFiles(const fs::path& root) {
 // visibility file with as many entries.
 void ExpectNoPartialFile(const fs::path& root, const std::string& when) {
   SCOPED_TRACE(when);
-  for (const auto& entry : fs::recursive_directory_iterator(root)) {
-    const fs::path& path = entry.path();
-    if (entry.is_symlink() || !entry.is_regular_file() || IsTemporary(path)) continue;
+  for (const auto& [relative, bytes] : testing::FinalOutputs(root)) {
+    const fs::path path = root / relative;
     const std::string folder = path.parent_path().filename().string();
     try {
       if (path.extension() == ".bin" &&
@@ -80,8 +66,7 @@ void ExpectNoPartialFile(const fs::path& root, const std::string& when) {
       } else if (path.filename() == "fusion.cfg") {
         colmap_io::ReadFusionConfig(path);
       } else if (path.filename() == "dispmvs_report.html") {
-        const std::string html = testing::ReadFileBytes(path);
-        EXPECT_EQ(html.substr(html.size() - 15), "</body></html>\n") << "report cut short";
+        EXPECT_EQ(bytes.substr(bytes.size() - 15), "</body></html>\n") << "report cut short";
       }
     } catch (const std::exception& error) {
       ADD_FAILURE() << "partial or unreadable file under its final name: " << error.what();
