@@ -17,6 +17,7 @@ packages=(
   colmap                  # the real peer in the interop tests
   unzip                   # bench/motorcycle_check.sh: the disparity inside scikit-image's .npz
   chromium                # the report_in_browser test: a real browser loads the run report
+  munge slurmctld slurmd slurm-client  # the slurm_one_node test starts a one-node Slurm cluster
   clang libclang-rt-14-dev  # the fuzz ctest (tests/fuzz/): libFuzzer targets need clang and its
                             # libFuzzer and sanitizer runtimes (Debian 12: clang 14)
 )

@@ -479,6 +479,9 @@ TEST_P(BadInputTest, ExitStatusMessageAndNothingPartial) {
   EXPECT_EQ(message, Substitute(bad.first_line, ws, dir.path())) << run.out << run.err;
   if (!run.err.empty()) {  // the error convention: one line
     EXPECT_EQ(run.err.find('\n'), run.err.size() - 1) << run.err;
+  } else if (bad.program == Program::kColmap && run.status == 1) {
+    // Views failed: the closing summary line says so, in full.
+    EXPECT_NE(run.out.find(" (with failures: exit status 1)\n"), std::string::npos) << run.out;
   }
   const auto after = testing::FinalOutputs(dir.path());
   if (bad.written == Written::kNothing) {

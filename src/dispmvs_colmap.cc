@@ -440,9 +440,9 @@ int Run(const Options& options) {
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   char total[64];
-  std::snprintf(total, sizeof total, "summary: total %.1f s, peak memory %.0f MB%s\n", seconds,
-                PeakMemoryMegabytes(), failed ? " (with failures: exit status 1)" : "");
-  std::cout << total;
+  std::snprintf(total, sizeof total, "summary: total %.1f s, peak memory %.0f MB", seconds,
+                PeakMemoryMegabytes());
+  std::cout << total << (failed ? " (with failures: exit status 1)" : "") << '\n';
   return failed ? 1 : 0;
 }
 
