@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "colmap_io/dense_array.h"
+#include "colmap_io/view_record.h"
 #include "dense/view_claim.h"
 #include "dense/workspace_maps.h"
 #include "fusion/depth_normals.h"
@@ -105,12 +106,27 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       const DenseArray normal = fusion::NormalMapFromDepth(estimate.depth, views[0].K);
       WriteMaps(PathsOf(workspace, name, kPhotometricType), estimate.depth, normal,
                 estimate.confidence);
+      // For the run report; after the maps, so a complete view never waits
+      // on it (a view killed in between just has no time in the report).
+      ViewRecord record;
+      record.seconds = SecondsSince(view_start);
+      record.width = estimate.depth.width();
+      record.height = estimate.depth.height();
+      record.num_sources = static_cast<int>(problem.source_image_ids.size());
+      record.device = options.estimator.device;
+      std::string record_note;
+      try {  // only the report needs it: not a reason to fail the view
+        WriteViewRecord(ViewRecordPath(workspace, name), record);
+      } catch (const std::exception& error) {
+        record_note = std::string(" (time not recorded: ") + error.what() + ")";
+      }
       ++summary.done;
       const double per_view = SecondsSince(compute_start) / static_cast<double>(i + 1);
       log << ": " << FormatSeconds(SecondsSince(view_start)) << ", "
           << views[0].image.cols << "x" << views[0].image.rows << ", depth at "
           << Percent(ValidFraction(estimate.depth)) << " of pixels, ETA "
-          << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << '\n'
+          << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << record_note
+          << '\n'
           << std::flush;
     } catch (const std::exception& error) {
       summary.failures.push_back(name + ": " + error.what());

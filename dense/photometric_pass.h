@@ -1,7 +1,8 @@
 #pragma once
 // The photometric pass of dispmvs_colmap: the DispMVS network on every stereo
 // problem of the plan that has at least one source, writing depth, normal and
-// confidence maps of type dispmvs.photometric (dense/workspace_maps.h).
+// confidence maps of type dispmvs.photometric (dense/workspace_maps.h), and
+// the view's time in WS/stereo/dispmvs_records/ (colmap_io/view_record.h).
 // A view whose maps all exist is skipped unless `overwrite` (so a killed run
 // resumes where it stopped); a view that fails is reported and the others
 // go on. Each view is claimed (dense/view_claim.h) while it is computed; a

@@ -19,6 +19,7 @@
 #include <unistd.h>
 
 #include "colmap_io/dense_array.h"
+#include "colmap_io/view_record.h"
 #include "dense/test_workspace.h"
 #include "dense/view_claim.h"
 #include "dense/workspace_maps.h"
@@ -60,6 +61,20 @@ TEST_F(PhotometricPassTest, WritesEveryViewAndResumesBitForBit) {
     EXPECT_EQ(depth.height(), 48);
     for (float d : depth.values()) ASSERT_TRUE(std::isfinite(d) && d >= 0) << name;
     EXPECT_GT(ValidFraction(depth), 0.5) << name;
+    // Its record for the report: the maps' size, the sources, the device and
+    // a time no longer than the whole pass's.
+    const auto record = colmap_io::ReadViewRecord(colmap_io::ViewRecordPath(workspace_, name));
+    ASSERT_TRUE(record.has_value()) << name;
+    EXPECT_EQ(record->width, 64);
+    EXPECT_EQ(record->height, 48);
+    for (const colmap_io::StereoProblem& problem : plan_.problems) {
+      if (plan_.ImageOf(problem.reference_image_id).name == name) {
+        EXPECT_EQ(record->num_sources, static_cast<int>(problem.source_image_ids.size()));
+      }
+    }
+    EXPECT_EQ(record->device, "cpu");
+    EXPECT_GT(record->seconds, 0);
+    EXPECT_LE(record->seconds, first.seconds);
   }
 
   // A finished run resumes instantly.

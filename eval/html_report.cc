@@ -15,6 +15,7 @@
 #include "colmap_io/dense_array.h"
 #include "colmap_io/image_io.h"
 #include "colmap_io/ply.h"
+#include "colmap_io/view_record.h"
 #include "colmap_io/workspace.h"
 #include "eval/cloud_render.h"
 #include "eval/depth_png.h"
@@ -85,6 +86,12 @@ std::string Percent(double fraction) {
 std::string Number(double value) {
   char text[32];
   std::snprintf(text, sizeof text, "%.4g", value);
+  return text;
+}
+
+std::string Seconds(double seconds) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.2f s", seconds);
   return text;
 }
 
@@ -233,6 +240,34 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
     html << "<h2>Settings</h2>\n<pre>" << Escape(options.settings) << "</pre>\n";
   }
 
+  // Time of the photometric pass, from the views' records.
+  std::vector<std::optional<colmap_io::ViewRecord>> records;
+  int timed = 0;
+  double total_seconds = 0;
+  const colmap_io::Image* slowest = nullptr;
+  double slowest_seconds = -1;
+  for (const auto* image : images) {
+    records.push_back(colmap_io::ReadViewRecord(colmap_io::ViewRecordPath(workspace, image->name)));
+    if (!records.back()) continue;
+    ++timed;
+    total_seconds += records.back()->seconds;
+    if (records.back()->seconds > slowest_seconds) {
+      slowest_seconds = records.back()->seconds;
+      slowest = image;
+    }
+  }
+  html << "<h2>Time</h2>\n<p>";
+  if (timed > 0) {
+    html << "Photometric pass (the network, per view: reading its images, estimating, "
+            "writing its maps): "
+         << timed << " view(s), " << Seconds(total_seconds) << " in all, "
+         << Seconds(total_seconds / timed) << " per view on average, slowest "
+         << Escape(slowest->name) << " (" << Seconds(slowest_seconds) << ").";
+  } else {
+    html << "No view has a recorded time (WS/stereo/dispmvs_records/).";
+  }
+  html << "</p>\n";
+
   // One row per image.
   html << "<h2>Depth maps</h2>\n<p>Depth colourised from blue (near) to red (far) on one "
           "scale per view (below the image: the 2nd to 98th percentile of the first map's "
@@ -247,7 +282,8 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
   html << "</tr>\n";
   const int width = options.thumbnail_width;
   int without_maps = 0;
-  for (const auto* image : images) {
+  for (std::size_t i = 0; i < images.size(); ++i) {
+    const colmap_io::Image* image = images[i];
     std::vector<std::optional<DenseArray>> ours, theirs;
     for (const MapType& type : kOurTypes) ours.push_back(ReadIfPresent(workspace.DepthMapPath(image->name, type.type)));
     for (const MapType& type : kPatchMatchTypes) theirs.push_back(ReadIfPresent(workspace.DepthMapPath(image->name, type.type)));
@@ -276,6 +312,10 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
       page.Image(picture, width, image->name);
     } else {
       html << "<br>(image unreadable)";
+    }
+    if (const auto& record = records[i]) {
+      html << "<div class=\"bar\">" << Seconds(record->seconds) << ", " << record->num_sources
+           << " source(s), " << Escape(record->device) << "</div>";
     }
     if (range) {
       cv::Mat bar(1, 256, CV_8UC1);

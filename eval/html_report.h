@@ -1,13 +1,14 @@
 #pragma once
 // The run report: one self-contained HTML file (images embedded, no script,
 // nothing fetched) to look at a dense workspace without writing code. Per
-// registered image: the image, our photometric and geometric depth maps
-// (colourised on one scale per view, the 2nd to 98th percentile of the first
-// map's depths, with its colour bar and range), the
-// normal and confidence maps, each map's coverage, and PatchMatch's maps
-// beside ours where `colmap patch_match_stereo` left them
+// registered image: the image, the time the network took on it, our
+// photometric and geometric depth maps (colourised on one scale per view, the
+// 2nd to 98th percentile of the first map's depths, with its colour bar and
+// range), the normal and confidence maps, each map's coverage, and
+// PatchMatch's maps beside ours where `colmap patch_match_stereo` left them
 // (NAME.photometric.bin, NAME.geometric.bin); for the workspace, the fused
-// cloud's size and three orthographic pictures of it, and the settings used.
+// cloud's size and three orthographic pictures of it, the settings used, and
+// the photometric pass's time per view and in all (colmap_io/view_record.h).
 // Thumbnails are small JPEGs (about 5 KB each) loaded lazily, so a report of
 // a thousand images stays near 30 MB and opens quickly.
 

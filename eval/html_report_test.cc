@@ -16,6 +16,7 @@
 
 #include "colmap_io/dense_array.h"
 #include "colmap_io/ply.h"
+#include "colmap_io/view_record.h"
 #include "colmap_io/workspace.h"
 #include "examples/example_workspace.h"
 #include "tests/support/temp_dir.h"
@@ -107,6 +108,42 @@ TEST_F(HtmlReportTest, PicturesDecodeAtThumbnailSize) {
   EXPECT_NE(html.find("No fused cloud"), std::string::npos);
   EXPECT_NE(html.find("&lt;ws&gt; &amp; more"), std::string::npos);  // escaped
   EXPECT_LT(html.size() / summary.embedded_images, 12000u);  // small thumbnails
+  EXPECT_NE(html.find("No view has a recorded time"), std::string::npos);
+}
+
+TEST_F(HtmlReportTest, TimePerViewAndInAllFromTheViewRecords) {
+  const colmap_io::Workspace workspace(root_);
+  const double seconds[] = {1.5, 0.25, 2.0};
+  for (int i = 0; i < 3; ++i) {
+    colmap_io::ViewRecord record;
+    record.seconds = seconds[i];
+    record.width = 320;
+    record.height = 240;
+    record.num_sources = 4 - i;
+    record.device = "cpu";
+    colmap_io::WriteViewRecord(
+        colmap_io::ViewRecordPath(workspace, "view_0" + std::to_string(i) + ".png"), record);
+  }
+  // A damaged record counts as none.
+  ::dispmvs::testing::WriteFileBytes(colmap_io::ViewRecordPath(workspace, "view_03.png"),
+                                     "seconds 9\nsize 3");
+  const fs::path html_path = dir_.path() / "report.html";
+  WriteHtmlReport(root_, html_path, HtmlReportOptions());
+  const std::string html = ::dispmvs::testing::ReadFileBytes(html_path);
+  EXPECT_NE(html.find(": 3 view(s), 3.75 s in all, 1.25 s per view on average, slowest "
+                      "view_02.png (2.00 s)."),
+            std::string::npos);
+  // In each timed view's row, after its name.
+  auto row_of = [&html](const std::string& name) {
+    const std::size_t start = html.find("<td class=\"name\">" + name);
+    return start == std::string::npos ? std::string()
+                                      : html.substr(start, html.find("</tr>", start) - start);
+  };
+  EXPECT_NE(row_of("view_00.png").find("1.50 s, 4 source(s), cpu"), std::string::npos);
+  EXPECT_NE(row_of("view_01.png").find("0.25 s, 3 source(s), cpu"), std::string::npos);
+  EXPECT_NE(row_of("view_02.png").find("2.00 s, 2 source(s), cpu"), std::string::npos);
+  EXPECT_EQ(row_of("view_03.png").find(" source(s), "), std::string::npos);
+  EXPECT_EQ(html.find("9.00 s"), std::string::npos);
 }
 
 TEST_F(HtmlReportTest, PatchMatchMapsAndTheCloudWhenPresent) {

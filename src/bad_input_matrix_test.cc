@@ -496,7 +496,9 @@ TEST_P(BadInputTest, ExitStatusMessageAndNothingPartial) {
     if (path.extension() == ".bin" && relative.find("stereo") != std::string::npos) {
       EXPECT_NO_THROW(colmap_io::ReadDenseArray(path)) << relative;
     }
-    if (path.filename() == "fused.ply") EXPECT_NO_THROW(colmap_io::ReadPlyPoints(path));
+    if (path.filename() == "fused.ply") {
+      EXPECT_NO_THROW(colmap_io::ReadPlyPoints(path));
+    }
   }
 }
 

@@ -65,7 +65,10 @@ interruption; --overwrite recomputes); files are written under a temporary
 name and renamed, so an interrupted run leaves no half-written file. Several
 processes may share a workspace (--shard K/N, run at once): each view is
 claimed with a lock in WS/stereo/dispmvs_claims/ while it is computed, so a
-view another process is computing is skipped and said so.
+view another process is computing is skipped and said so. Each computed
+view's time goes to WS/stereo/dispmvs_records/NAME.txt, which the run report
+(WS/dispmvs_report.html) shows. examples/slurm/ runs the shards on a Slurm
+cluster (a job array, then a dependent fusion job).
 
 Depth range: each image's range comes from the sparse points it sees (COLMAP's
 percentiles and margin; an image seeing none takes the union of the others'),

@@ -79,7 +79,7 @@ TEST(ConcurrencyTest, ShardsAtOnceAndADuplicateGiveTheSingleProcessBytes) {
 
   // Shard 0/2 twice and shard 1/2, all started at once.
   std::vector<std::unique_ptr<WatchedProcess>> runs;
-  for (const std::string& shard : {"0/2", "1/2", "0/2"}) {
+  for (const char* shard : {"0/2", "1/2", "0/2"}) {
     runs.push_back(std::make_unique<WatchedProcess>(
         DISPMVS_COLMAP_PROGRAM, Args(shared, "photometric", shard),
         dir.path() / ("shard" + std::to_string(runs.size()) + ".log")));

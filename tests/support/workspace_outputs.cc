@@ -12,7 +12,10 @@ std::map<std::string, std::string> FinalOutputs(const fs::path& root) {
     if (entry.is_symlink() || !entry.is_regular_file()) continue;
     if (entry.path().filename().string().find(".tmp-") != std::string::npos) continue;
     const std::string relative = fs::relative(entry.path(), root).string();
-    if (relative.find("dispmvs_claims") != std::string::npos) continue;
+    if (relative.find("dispmvs_claims") != std::string::npos ||
+        relative.find("dispmvs_records") != std::string::npos) {
+      continue;
+    }
     files[relative] = ReadFileBytes(entry.path());
   }
   return files;
