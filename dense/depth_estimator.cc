@@ -8,6 +8,7 @@
 #include <ATen/CPUGeneratorImpl.h>
 #include <torch/torch.h>
 
+#include "dense/feature_cache.h"
 #include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/safetensors.h"
@@ -69,17 +70,21 @@ void EstimatorOptions::Check() const {
   if (coarse_iterations < 0 || fine_iterations < 0) {
     throw std::invalid_argument("--coarse_iterations and --fine_iterations must be >= 0");
   }
+  if (feature_cache_mb < 0) throw std::invalid_argument("--feature_cache_mb must be >= 0");
 }
 
 struct DepthEstimator::Impl {
   torch::Device device{torch::kCPU};
   model::ModelConfig config;
   model::DispMvsNet net{nullptr};
+  std::unique_ptr<FeatureCache> features;
 };
 
 DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::make_unique<Impl>()) {
   options.Check();
   impl_->device = model::ParseUsableDevice(options.device, "--device");
+  impl_->features =
+      std::make_unique<FeatureCache>(static_cast<std::size_t>(options.feature_cache_mb) << 20);
   const int threads = options.threads > 0
                           ? options.threads
                           : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
@@ -123,6 +128,15 @@ std::string DepthEstimator::Describe() const {
          std::to_string(impl_->config.fine_iterations) + " iterations, " + impl_->device.str();
 }
 
+DepthEstimator::EncoderUse DepthEstimator::encoder_use() const {
+  const FeatureCache::Stats& stats = impl_->features->stats();
+  EncoderUse use;
+  use.encoded = stats.misses;
+  use.reused = stats.hits;
+  use.peak_cache_mb = static_cast<double>(stats.peak_bytes) / (1 << 20);
+  return use;
+}
+
 DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
                                        const std::optional<colmap_io::DepthRange>& hint,
                                        uint64_t seed) {
@@ -161,6 +175,19 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
   }
 
   torch::NoGradGuard no_grad;
+  // Each view's matching features, encoded alone (as forward() would), so a
+  // reused one gives the same bits as a fresh one.
+  std::vector<torch::Tensor> coarse, fine;
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    const auto encode = [&] { return impl_->net->EncodeMatching(input.images[0][v].unsqueeze(0)); };
+    const model::FeaturePyramid features =
+        views[v].image_id >= 0
+            ? impl_->features->Get({views[v].image_id, size.width, size.height}, encode)
+            : encode();
+    coarse.push_back(features.coarse);
+    fine.push_back(features.fine);
+  }
+  input.matching_features = {torch::cat(coarse, 0), torch::cat(fine, 0)};
   // The initialisation is drawn on the CPU and moved, so CPU and CUDA runs
   // start from the same random depths.
   const model::DispMvsOutput output =

@@ -26,6 +26,10 @@ struct EstimatorOptions {
   // GRU iterations per stage; 0 = those the weights were trained with.
   int coarse_iterations = 0;
   int fine_iterations = 0;
+  // Budget for the matching encoder's features kept across problems (an
+  // image that is the source of several references is encoded once), MiB;
+  // 0 = encode every view of every problem.
+  int feature_cache_mb = 256;
 
   // Throws std::invalid_argument naming the command-line option at fault.
   void Check() const;
@@ -35,6 +39,9 @@ struct EstimatorOptions {
 // [0, 1] on COLMAP's dense index grid (colmap_io::ResampleToDenseIndexGrid),
 // its COLMAP intrinsics at that size, and its world-to-camera pose.
 struct ProblemView {
+  // The workspace image it shows, so that its encoder features can be reused
+  // by later problems at the same size; -1: not reused.
+  int64_t image_id = -1;
   cv::Mat image;
   Eigen::Matrix3d K;
   Eigen::Matrix3d R;
@@ -83,6 +90,15 @@ class DepthEstimator {
 
   // "small, 1675558 parameters, 8+2 iterations, cpu" for logs.
   std::string Describe() const;
+
+  // How often the matching encoder ran, and how often its features were
+  // reused from an earlier problem (EstimatorOptions::feature_cache_mb).
+  struct EncoderUse {
+    int64_t encoded = 0;
+    int64_t reused = 0;
+    double peak_cache_mb = 0;
+  };
+  EncoderUse encoder_use() const;
 
  private:
   struct Impl;

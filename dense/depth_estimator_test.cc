@@ -109,5 +109,46 @@ TEST(DepthEstimatorTest, ModelV2WeightsRunWithoutAHint) {
   ExpectUsableEstimate(estimator.Estimate(SmallProblem(), Hint(2, 20), 1));
 }
 
+// Reused encoder features give the bits of freshly encoded ones: three
+// problems over images 10, 11, 12 (each the reference once), where every
+// image after its first use comes from the cache.
+TEST(DepthEstimatorTest, ReusedEncoderFeaturesGiveTheSameMaps) {
+  const testing::TempDir dir;
+  const std::string path = WriteRandomWeights(model::ModelConfig::SmallV2(), dir);
+  const std::vector<ProblemView> base = SmallProblem();
+  auto problem = [&](std::vector<int> order, bool with_ids) {
+    std::vector<ProblemView> views;
+    for (const int i : order) {
+      views.push_back(base[static_cast<std::size_t>(i)]);
+      views.back().image_id = with_ids ? 10 + i : -1;
+    }
+    return views;
+  };
+  const std::vector<std::vector<int>> orders = {{0, 1, 2}, {1, 0, 2}, {2, 1, 0}};
+  DepthEstimator fresh(OptionsFor(path));
+  DepthEstimator reusing(OptionsFor(path));
+  for (const auto& order : orders) {
+    const DepthEstimate a = fresh.Estimate(problem(order, false), std::nullopt, 1);
+    const DepthEstimate b = reusing.Estimate(problem(order, true), std::nullopt, 1);
+    EXPECT_EQ(a.depth.values(), b.depth.values());
+    EXPECT_EQ(a.confidence.values(), b.confidence.values());
+  }
+  EXPECT_EQ(fresh.encoder_use().encoded, 0);  // no ids: never cached
+  EXPECT_EQ(reusing.encoder_use().encoded, 3);
+  EXPECT_EQ(reusing.encoder_use().reused, 6);
+  // Three images of 64x48: 64 coarse channels at 4x3 and 48 fine at 16x12.
+  EXPECT_NEAR(reusing.encoder_use().peak_cache_mb, 3 * (64 * 12 + 48 * 192) * 4.0 / (1 << 20), 1e-9);
+
+  // Without a budget nothing is kept; a negative one is refused.
+  EstimatorOptions none = OptionsFor(path);
+  none.feature_cache_mb = 0;
+  DepthEstimator uncached(none);
+  for (const auto& order : orders) uncached.Estimate(problem(order, true), std::nullopt, 1);
+  EXPECT_EQ(uncached.encoder_use().encoded, 9);
+  EXPECT_EQ(uncached.encoder_use().reused, 0);
+  none.feature_cache_mb = -1;
+  EXPECT_THROW(none.Check(), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace dispmvs::dense

@@ -1,5 +1,6 @@
 #include "dense/photometric_pass.h"
 
+#include <cmath>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -133,6 +134,10 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       log << ": FAILED: " << error.what() << '\n' << std::flush;
     }
   }
+  const DepthEstimator::EncoderUse encoders = estimator.encoder_use();
+  log << "photometric: encoder ran on " << encoders.encoded << " image(s), reused "
+      << encoders.reused << " time(s) (at most " << static_cast<int>(std::ceil(encoders.peak_cache_mb))
+      << " MiB kept, --feature_cache_mb " << options.estimator.feature_cache_mb << ")\n";
   summary.seconds = SecondsSince(start);
   return summary;
 }

@@ -17,6 +17,7 @@ namespace {
 ProblemView MakeView(const ResizedImage& full, const Image& image, const cv::Size& size) {
   const ResizedImage grid = ResampleToDenseIndexGrid(full.image, full.K, size);
   ProblemView view;
+  view.image_id = static_cast<int64_t>(image.image_id);
   view.image = grid.image;
   view.K = grid.K;
   view.R = image.RotationMatrix();

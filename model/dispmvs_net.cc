@@ -1,9 +1,11 @@
 #include "model/dispmvs_net.h"
 
+#include <algorithm>
 #include <cmath>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "model/convex_upsample.h"
 #include "model/correlation.h"
@@ -369,6 +371,46 @@ torch::Tensor SourceAgreement(const Triangulation& t, const torch::Tensor& fused
       .sum(1, /*keepdim=*/true);
 }
 
+// Inference (no autograd) runs the update block on a few (reference,
+// source) pairs at a time (UpdateInChunks): its intermediate maps would
+// otherwise make up most of the peak memory at large sizes. Training keeps
+// one call: autograd holds the intermediates anyway.
+constexpr int64_t kUpdatePixelsPerCall = int64_t{1} << 16;
+
+// The matching encoder on padded images [B',3,H',W'], one image at a time:
+// in inference the encoder's full-resolution intermediate maps would
+// otherwise grow with the number of views, and per-image encoding is what
+// DispMvsNetImpl::EncodeMatching caches (instance norm is per image, so the
+// features are those of a batched pass, up to the last bits).
+FeaturePyramid EncodeOneByOne(MatchingEncoder& encoder, const torch::Tensor& padded) {
+  std::vector<torch::Tensor> coarse, fine;
+  for (int64_t i = 0; i < padded.size(0); ++i) {
+    const FeaturePyramid one = encoder->forward(padded.narrow(0, i, 1));
+    coarse.push_back(one.coarse);
+    fine.push_back(one.fine);
+  }
+  return {torch::cat(coarse, 0), torch::cat(fine, 0)};
+}
+
+void CheckMatchingFeatures(const FeaturePyramid& features, const torch::Tensor& padded,
+                           const ModelConfig& config) {
+  const int64_t views = padded.size(0), height = padded.size(2), width = padded.size(3);
+  auto check = [&](const torch::Tensor& t, int64_t channels, int64_t stride, const char* name) {
+    if (!t.defined() || t.dim() != 4 || t.size(0) != views || t.size(1) != channels ||
+        t.size(2) != height / stride || t.size(3) != width / stride ||
+        t.device() != padded.device() || t.scalar_type() != padded.scalar_type()) {
+      throw std::invalid_argument(
+          std::string("DispMvsNet: matching_features.") + name + " must be [" +
+          std::to_string(views) + "," + std::to_string(channels) + "," +
+          std::to_string(height / stride) + "," + std::to_string(width / stride) +
+          "] on the images' device and type, got " +
+          (t.defined() ? c10::str(t.sizes()) : std::string("undefined")));
+    }
+  };
+  check(features.coarse, config.match_coarse_channels, DispMvsNetImpl::kCoarseStride, "coarse");
+  check(features.fine, config.match_fine_channels, DispMvsNetImpl::kFineStride, "fine");
+}
+
 // One stage: `in.iterations` GRU updates of every source's E-flow, each
 // followed by triangulation and fusion (the header's outline).
 StageResult RunStage(const StageInput& in, UpdateBlock& block, StageTimer* timer) {
@@ -406,7 +448,9 @@ StageResult RunStage(const StageInput& in, UpdateBlock& block, StageTimer* timer
     UpdateBlockOutput update;
     {
       const StageTimer::Section gru(timer, NetStage::kUpdate);
-      update = block->forward(hidden, context, cost.cost, eflow);
+      update = torch::GradMode::is_enabled()
+                   ? block->forward(hidden, context, cost.cost, eflow)
+                   : UpdateInChunks(block, hidden, context, cost.cost, eflow, kUpdatePixelsPerCall);
     }
     hidden = update.hidden;
     const Triangulation triangulation = TriangulateAndFuse(in, setup, base_xy, eflow, update, timer);
@@ -556,7 +600,14 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   FeaturePyramid matching, context;
   {
     const StageTimer::Section encoders(timer, NetStage::kEncoders);
-    matching = matching_encoder_->forward(images);
+    if (input.matching_features.coarse.defined()) {
+      CheckMatchingFeatures(input.matching_features, images, config_);
+      matching = input.matching_features;
+    } else if (!torch::GradMode::is_enabled()) {
+      matching = EncodeOneByOne(matching_encoder_, images);
+    } else {
+      matching = matching_encoder_->forward(images);
+    }
     context = context_encoder_->forward(
         images.view({b, v, 3, images.size(2), images.size(3)}).select(1, 0));
   }
@@ -596,6 +647,14 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   const StageTimer::Section upsampling(timer, NetStage::kUpsampling);
   return FullResolutionOutputs(coarse, fine, v2, is_training(), input.images.size(3),
                                input.images.size(4), opts);
+}
+
+FeaturePyramid DispMvsNetImpl::EncodeMatching(const torch::Tensor& images) {
+  if (!images.defined() || images.dim() != 4 || images.size(1) != 3 || images.size(0) < 1) {
+    throw std::invalid_argument("DispMvsNet::EncodeMatching: images must be [B,3,H,W]");
+  }
+  const torch::NoGradGuard no_grad;
+  return EncodeOneByOne(matching_encoder_, PadViews(images.unsqueeze(1), kCoarseStride));
 }
 
 void DispMvsNetImpl::set_iterations(int64_t coarse, int64_t fine) {

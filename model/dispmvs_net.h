@@ -54,6 +54,14 @@ struct DispMvsInput {
   // (!ModelConfig::NeedsDepthRange()).
   torch::Tensor depth_min;
   torch::Tensor depth_max;
+  // Optional: the matching encoder's features of every view, coarse
+  // [B*V, C, H'/16, W'/16] and fine [B*V, C', H'/4, W'/4] (H', W': the size
+  // padded to multiples of 16), index b*V + view, as EncodeMatching() gives
+  // them for each view. When set, forward() does not run the matching
+  // encoder, so a caller that meets the same image in many problems (a
+  // source of several references) encodes it once. Inference only: the
+  // features carry no gradient to the encoder.
+  FeaturePyramid matching_features;
 };
 
 struct DispMvsOutput {
@@ -103,6 +111,12 @@ class DispMvsNetImpl : public torch::nn::Module {
   // range that is not 0 < depth_min < depth_max, non-finite values).
   // `gen` drives the random initialisation (default generator if undefined).
   DispMvsOutput forward(const DispMvsInput& input, torch::Generator gen = {});
+
+  // The matching encoder's features of images [B,3,H,W] in [0,1], padded as
+  // forward() pads them and encoded one image at a time, as forward() does
+  // in inference (no autograd): so features computed here and passed in
+  // DispMvsInput::matching_features give bit-identical results.
+  FeaturePyramid EncodeMatching(const torch::Tensor& images);
 
   // The coarse segment volume alone (matching encoder, no GRU), with the
   // encoder's real cell positions whatever the configuration: how well the

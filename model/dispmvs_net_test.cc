@@ -163,6 +163,74 @@ TEST(DispMvsNetV2Test, RunsWithoutADepthRangeDeterministically) {
   EXPECT_THROW(paper->forward(in), std::invalid_argument);
 }
 
+// What a caller that caches encoder features relies on: features from
+// EncodeMatching, one view at a time, give the bits of a plain inference pass.
+TEST(DispMvsNetInferenceTest, PrecomputedMatchingFeaturesGiveTheSameBits) {
+  DispMvsNet net(FastV2Config());
+  net->eval();
+  torch::NoGradGuard no_grad;
+  const int64_t batch = 2, views = 4, height = 40, width = 60;  // padded to 48x64
+  const DispMvsInput in = MakeInput(batch, views - 1, height, width);
+  const DispMvsOutput plain = net->forward(in);
+
+  std::vector<torch::Tensor> coarse, fine;
+  for (int64_t b = 0; b < batch; ++b) {
+    for (int64_t v = 0; v < views; ++v) {  // each view alone, in index b*V + v
+      const FeaturePyramid one = net->EncodeMatching(in.images[b][v].unsqueeze(0));
+      ASSERT_EQ(one.coarse.sizes(), (std::vector<int64_t>{1, 64, 3, 4}));
+      ASSERT_EQ(one.fine.sizes(), (std::vector<int64_t>{1, 48, 12, 16}));
+      coarse.push_back(one.coarse);
+      fine.push_back(one.fine);
+    }
+  }
+  DispMvsInput cached = in;
+  cached.matching_features = {torch::cat(coarse, 0), torch::cat(fine, 0)};
+  const DispMvsOutput from_cache = net->forward(cached);
+  EXPECT_TRUE(torch::equal(plain.depth, from_cache.depth));
+  EXPECT_TRUE(torch::equal(plain.confidence, from_cache.confidence));
+  EXPECT_TRUE(torch::equal(plain.valid, from_cache.valid));
+
+  // Features of another view count, size or channel count are refused.
+  DispMvsInput wrong = cached;
+  wrong.matching_features.coarse = cached.matching_features.coarse.narrow(0, 0, 7);
+  EXPECT_THROW(net->forward(wrong), std::invalid_argument);
+  wrong = cached;
+  wrong.matching_features.fine = cached.matching_features.fine.narrow(1, 0, 47);
+  EXPECT_THROW(net->forward(wrong), std::invalid_argument);
+  wrong = cached;
+  wrong.matching_features.fine = torch::Tensor();
+  EXPECT_THROW(net->forward(wrong), std::invalid_argument);
+  EXPECT_THROW(net->EncodeMatching(in.images), std::invalid_argument);  // [B,V,3,H,W]
+}
+
+// Inference encodes the views one at a time and runs the fine stage's update
+// block on a few sources at a time (to bound memory); the result must be the
+// batched pass's, up to float rounding. 704x512 has a 176x128 fine stage, so
+// its 3 (reference, source) pairs go through the block as 2 + 1.
+TEST(DispMvsNetInferenceTest, ChunkedInferenceMatchesTheBatchedPass) {
+  DispMvsNet net(FastV2Config());
+  net->eval();
+  const DispMvsInput in = MakeInput(1, 3, 512, 704);
+  DispMvsOutput batched;
+  {
+    // With autograd on, forward() keeps one encoder call and one update
+    // call per iteration: the reference.
+    const torch::AutoGradMode grad(true);
+    batched = net->forward(in);
+  }
+  torch::NoGradGuard no_grad;
+  const DispMvsOutput chunked = net->forward(in);
+  const torch::Tensor both = batched.valid & chunked.valid;
+  EXPECT_GT(both.to(torch::kFloat).mean().item<double>(), 0.9);
+  const torch::Tensor relative =
+      ((batched.depth.detach() - chunked.depth).abs() / batched.depth.detach().clamp_min(1e-6))
+          .masked_select(both);
+  // Rounding differences can flip a pixel's path through the iterations, but
+  // not many, and not far.
+  EXPECT_GT((relative < 1e-4).to(torch::kFloat).mean().item<double>(), 0.999);
+  EXPECT_TRUE(torch::equal(batched.valid, chunked.valid));
+}
+
 TEST(DispMvsNetV2Test, TrainingReturnsBothStagesMatchingAndTheLossReachesEveryParameter) {
   DispMvsNet net(FastV2Config());
   net->train();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace dispmvs::model {
 namespace {
@@ -111,6 +112,33 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
       head_conv2_->forward(torch::relu(head_conv1_->forward(out.hidden)));
   out.delta_eflow = heads.narrow(1, 0, 1);
   out.weight_logit = heads.narrow(1, 1, 1);
+  return out;
+}
+
+UpdateBlockOutput UpdateInChunks(UpdateBlock& block, const torch::Tensor& hidden,
+                                 const torch::Tensor& context, const torch::Tensor& correlation,
+                                 const torch::Tensor& eflow, int64_t max_pixels) {
+  if (!hidden.defined() || hidden.dim() != 4) {
+    throw std::invalid_argument("UpdateInChunks: hidden must be [B,C,h,w]");
+  }
+  const int64_t pairs = hidden.size(0);
+  const int64_t pixels = std::max<int64_t>(hidden.size(2) * hidden.size(3), 1);
+  const int64_t chunk = std::max<int64_t>(1, max_pixels / pixels);
+  if (chunk >= pairs) return block->forward(hidden, context, correlation, eflow);
+  std::vector<torch::Tensor> hiddens, deltas, logits;
+  for (int64_t start = 0; start < pairs; start += chunk) {
+    const int64_t n = std::min(chunk, pairs - start);
+    const UpdateBlockOutput part =
+        block->forward(hidden.narrow(0, start, n), context.narrow(0, start, n),
+                       correlation.narrow(0, start, n), eflow.narrow(0, start, n));
+    hiddens.push_back(part.hidden);
+    deltas.push_back(part.delta_eflow);
+    logits.push_back(part.weight_logit);
+  }
+  UpdateBlockOutput out;
+  out.hidden = torch::cat(hiddens, 0);
+  out.delta_eflow = torch::cat(deltas, 0);
+  out.weight_logit = torch::cat(logits, 0);
   return out;
 }
 

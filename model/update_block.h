@@ -83,4 +83,14 @@ class UpdateBlockImpl : public torch::nn::Module {
 };
 TORCH_MODULE(UpdateBlock);
 
+// block->forward() on a few pairs at a time: chunks of the batch of at most
+// max(1, max_pixels / (h * w)) pairs, outputs concatenated. The pairs are
+// independent in the block, so the result is the whole-batch call's (up to
+// float rounding), while the block's intermediate maps (hundreds of channels
+// per pair) shrink to one chunk's: the inference driver's way to bound
+// memory at large image sizes (docs/benchmarks.md).
+UpdateBlockOutput UpdateInChunks(UpdateBlock& block, const torch::Tensor& hidden,
+                                 const torch::Tensor& context, const torch::Tensor& correlation,
+                                 const torch::Tensor& eflow, int64_t max_pixels);
+
 }  // namespace dispmvs::model

@@ -97,6 +97,28 @@ TEST(UpdateBlockTest, GradientReachesEveryParameter) {
   }
 }
 
+// Chunks of pairs give every pair its own inputs and outputs: each pair's
+// output equals the one-call output, whatever the chunk size (7 pairs in
+// chunks of 1, 2, 3 and all).
+TEST(UpdateBlockTest, UpdateInChunksMatchesOneCall) {
+  torch::manual_seed(4);
+  UpdateBlock block(/*correlation_channels=*/10, /*hidden=*/8, /*context=*/6, /*factor=*/4);
+  torch::NoGradGuard no_grad;
+  const int64_t pairs = 7, h = 6, w = 5;
+  const torch::Tensor hidden = torch::randn({pairs, 8, h, w}).tanh();
+  const torch::Tensor context = torch::randn({pairs, 6, h, w}).relu();
+  const torch::Tensor cost = torch::randn({pairs, 10, h, w});
+  const torch::Tensor eflow = torch::randn({pairs, 1, h, w});
+  const UpdateBlockOutput whole = block->forward(hidden, context, cost, eflow);
+  for (const int64_t max_pixels : {int64_t{1}, 2 * h * w, 3 * h * w + 1, 100 * h * w}) {
+    const UpdateBlockOutput chunked = UpdateInChunks(block, hidden, context, cost, eflow, max_pixels);
+    EXPECT_TRUE(torch::allclose(chunked.hidden, whole.hidden, 1e-5, 1e-6)) << max_pixels;
+    EXPECT_TRUE(torch::allclose(chunked.delta_eflow, whole.delta_eflow, 1e-5, 1e-6)) << max_pixels;
+    EXPECT_TRUE(torch::allclose(chunked.weight_logit, whole.weight_logit, 1e-5, 1e-6)) << max_pixels;
+  }
+  EXPECT_THROW(UpdateInChunks(block, torch::Tensor(), context, cost, eflow, 1), std::invalid_argument);
+}
+
 TEST(UpdateBlockTest, RejectsBadInput) {
   EXPECT_THROW(UpdateBlock(0, 4, 3, 4), std::invalid_argument);
   EXPECT_THROW(UpdateBlock(5, 4, 3, 0), std::invalid_argument);
