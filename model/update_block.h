@@ -88,7 +88,7 @@ TORCH_MODULE(UpdateBlock);
 // independent in the block, so the result is the whole-batch call's (up to
 // float rounding), while the block's intermediate maps (hundreds of channels
 // per pair) shrink to one chunk's: the inference driver's way to bound
-// memory at large image sizes (docs/benchmarks.md).
+// memory at large image sizes on the CPU (docs/benchmarks.md).
 UpdateBlockOutput UpdateInChunks(UpdateBlock& block, const torch::Tensor& hidden,
                                  const torch::Tensor& context, const torch::Tensor& correlation,
                                  const torch::Tensor& eflow, int64_t max_pixels);
