@@ -195,6 +195,12 @@ DenseArray ReadDenseArray(const std::filesystem::path& path) {
   return ReadDenseArray(in, path.string());
 }
 
+std::optional<DenseArray> ReadDenseArrayIfPresent(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) return std::nullopt;
+  return ReadDenseArray(path);
+}
+
 void WriteDenseArray(const DenseArray& array, const std::filesystem::path& path) {
   if (array.empty()) {
     throw IoError(path.string(), "refusing to write an empty dense array (" +

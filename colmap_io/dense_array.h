@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <istream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -62,6 +63,11 @@ class DenseArray {
 // data). Nothing is allocated before the size has been checked against the
 // bytes actually present.
 DenseArray ReadDenseArray(const std::filesystem::path& path);
+
+// nullopt when there is no regular file at `path` (a map that was not
+// computed); otherwise ReadDenseArray(path), which throws for a file that
+// cannot be read.
+std::optional<DenseArray> ReadDenseArrayIfPresent(const std::filesystem::path& path);
 
 // Same, from a seekable stream positioned at the header (the whole rest of the
 // stream is the file). `source_name` is used in error messages.

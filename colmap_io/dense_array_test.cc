@@ -241,5 +241,20 @@ TEST(DenseArrayTest, WritingAnEmptyArrayIsAnError) {
   EXPECT_FALSE(std::filesystem::exists(path));
 }
 
+TEST(DenseArrayTest, ReadIfPresentTellsAbsentFromBroken) {
+  const TempDir dir;
+  const std::filesystem::path path = dir.path() / "d.bin";
+  EXPECT_FALSE(ReadDenseArrayIfPresent(path).has_value());  // absent
+  std::filesystem::create_directory(dir.path() / "folder.bin");
+  EXPECT_FALSE(ReadDenseArrayIfPresent(dir.path() / "folder.bin").has_value());  // not a file
+  WriteDenseArray(DenseArray(3, 2, 1, 4.5f), path);
+  const std::optional<DenseArray> read = ReadDenseArrayIfPresent(path);
+  ASSERT_TRUE(read.has_value());
+  EXPECT_EQ(read->width(), 3);
+  EXPECT_EQ(read->at(1, 2), 4.5f);
+  WriteFileBytes(path, "3&2&1&");  // present but truncated
+  EXPECT_THROW(ReadDenseArrayIfPresent(path), IoError);
+}
+
 }  // namespace
 }  // namespace dispmvs::colmap_io

@@ -177,11 +177,6 @@ std::optional<DepthRange> RobustRange(const DenseArray& depth) {
   return range;
 }
 
-std::optional<DenseArray> ReadIfPresent(const fs::path& path) {
-  if (!fs::is_regular_file(path)) return std::nullopt;
-  return colmap_io::ReadDenseArray(path);
-}
-
 void WriteStyle(std::ostringstream& html) {
   html << "<style>body{font-family:sans-serif;background:#fafafa;color:#222;margin:1em}"
           "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px;"
@@ -285,8 +280,8 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
   for (std::size_t i = 0; i < images.size(); ++i) {
     const colmap_io::Image* image = images[i];
     std::vector<std::optional<DenseArray>> ours, theirs;
-    for (const MapType& type : kOurTypes) ours.push_back(ReadIfPresent(workspace.DepthMapPath(image->name, type.type)));
-    for (const MapType& type : kPatchMatchTypes) theirs.push_back(ReadIfPresent(workspace.DepthMapPath(image->name, type.type)));
+    for (const MapType& type : kOurTypes) ours.push_back(colmap_io::ReadDenseArrayIfPresent(workspace.DepthMapPath(image->name, type.type)));
+    for (const MapType& type : kPatchMatchTypes) theirs.push_back(colmap_io::ReadDenseArrayIfPresent(workspace.DepthMapPath(image->name, type.type)));
     bool any_map = false;
     for (const auto* maps : {&ours, &theirs}) {
       for (const auto& map : *maps) any_map = any_map || map.has_value();
@@ -341,8 +336,8 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
     for (std::size_t t = 0; t < ours.size(); ++t) depth_cell(ours[t], kOurTypes[t].title);
     // Normals and confidence of our most filtered map.
     const char* ours_type = ours[1] ? kOurTypes[1].type : kOurTypes[0].type;
-    const auto normals = ReadIfPresent(workspace.NormalMapPath(image->name, ours_type));
-    const auto confidence = ReadIfPresent(workspace.ConfidenceMapPath(image->name, ours_type));
+    const auto normals = colmap_io::ReadDenseArrayIfPresent(workspace.NormalMapPath(image->name, ours_type));
+    const auto confidence = colmap_io::ReadDenseArrayIfPresent(workspace.ConfidenceMapPath(image->name, ours_type));
     html << "<td>";
     if (normals && normals->channels() == 3) {
       page.Image(ColouriseNormals(*normals), width, "normals", true);

@@ -65,9 +65,8 @@ bool Valid(float depth) { return std::isfinite(depth) && depth > 0; }
 std::optional<DenseArray> ReadMapIfAny(const Workspace& workspace, const std::string& name,
                                        const std::string& type) {
   const fs::path path = workspace.DepthMapPath(name, type);
-  if (!fs::is_regular_file(path)) return std::nullopt;
-  DenseArray depth = ReadDenseArray(path);
-  if (depth.channels() != 1) throw IoError(path.string(), "depth map must have 1 channel");
+  std::optional<DenseArray> depth = colmap_io::ReadDenseArrayIfPresent(path);
+  if (depth && depth->channels() != 1) throw IoError(path.string(), "depth map must have 1 channel");
   return depth;
 }
 
