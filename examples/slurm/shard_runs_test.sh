@@ -70,7 +70,9 @@ for tool in munged munge slurmctld slurmd sbatch sinfo scontrol; do
   command -v "$tool" > /dev/null || { echo "FAIL: $tool not found (apt-get install munge slurmctld slurmd slurm-client)"; exit 1; }
 done
 # munged refuses a socket or key in a folder others can write to or not
-# enter: the key folder is private, the socket folder open to all.
+# enter: the key folder is private, the socket folder open to all. --force
+# turns its checks of the folders above WORK_DIR (a build tree may sit in a
+# group-writable one) into warnings: this daemon lives for one test.
 chmod 711 "$work"
 mkdir -m 700 "$work/munge" "$work/state" "$work/spool"
 mkdir -m 755 "$work/run" "$work/log"
@@ -91,7 +93,7 @@ cleanup() {
 }
 trap cleanup EXIT
 
-munged --key-file="$work/munge/munge.key" --socket="$work/run/munge.socket" \
+munged --force --key-file="$work/munge/munge.key" --socket="$work/run/munge.socket" \
   --pid-file="$work/run/munged.pid" --log-file="$work/log/munged.log" \
   --seed-file="$work/munge/munged.seed"
 
