@@ -34,7 +34,6 @@ using dispmvs::model::UpdateBlock;
 using dispmvs::model::UpdateBlockOutput;
 
 constexpr int64_t kSources = 5;
-constexpr int64_t kDriverPixelsPerCall = int64_t{1} << 16;  // model/dispmvs_net.cc
 
 struct Problem {
   UpdateBlock block{nullptr};
@@ -81,7 +80,8 @@ void BM_BlockInChunks(benchmark::State& state) {
   Problem p = MakeProblem(state);
   for (auto _ : state) {
     const UpdateBlockOutput out = dispmvs::model::UpdateInChunks(
-        p.block, p.hidden, p.context, p.cost, p.eflow, kDriverPixelsPerCall);
+        p.block, p.hidden, p.context, p.cost, p.eflow,
+        dispmvs::model::kInferenceUpdatePixelsPerCall);
     benchmark::DoNotOptimize(out.hidden.data_ptr());
   }
   Label(state);

@@ -123,7 +123,7 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       }
       ++summary.done;
       const double per_view = SecondsSince(compute_start) / static_cast<double>(i + 1);
-      log << ": " << FormatSeconds(SecondsSince(view_start)) << ", "
+      log << ": " << FormatSeconds(record.seconds) << ", "
           << views[0].image.cols << "x" << views[0].image.rows << ", depth at "
           << Percent(ValidFraction(estimate.depth)) << " of pixels, ETA "
           << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << record_note

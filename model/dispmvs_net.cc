@@ -371,13 +371,6 @@ torch::Tensor SourceAgreement(const Triangulation& t, const torch::Tensor& fused
       .sum(1, /*keepdim=*/true);
 }
 
-// Inference (no autograd) on the CPU runs the update block on a few
-// (reference, source) pairs at a time (UpdateInChunks): its intermediate maps
-// would otherwise make up most of the peak memory at large sizes. Training
-// keeps one call (autograd holds the intermediates anyway), and so does a GPU,
-// which has the memory and wants the larger kernels.
-constexpr int64_t kUpdatePixelsPerCall = int64_t{1} << 16;
-
 // The matching encoder on padded images [B',3,H',W'], one image at a time:
 // in inference the encoder's full-resolution intermediate maps would
 // otherwise grow with the number of views, and per-image encoding is what
@@ -449,9 +442,15 @@ StageResult RunStage(const StageInput& in, UpdateBlock& block, StageTimer* timer
     UpdateBlockOutput update;
     {
       const StageTimer::Section gru(timer, NetStage::kUpdate);
+      // Inference on the CPU runs the block on a few (reference, source)
+      // pairs at a time: its intermediate maps would otherwise make up most
+      // of the peak memory at large sizes. Training keeps one call (autograd
+      // holds the intermediates anyway), and so does a GPU, which has the
+      // memory and wants the larger kernels.
       update = torch::GradMode::is_enabled() || hidden.is_cuda()
                    ? block->forward(hidden, context, cost.cost, eflow)
-                   : UpdateInChunks(block, hidden, context, cost.cost, eflow, kUpdatePixelsPerCall);
+                   : UpdateInChunks(block, hidden, context, cost.cost, eflow,
+                                    kInferenceUpdatePixelsPerCall);
     }
     hidden = update.hidden;
     const Triangulation triangulation = TriangulateAndFuse(in, setup, base_xy, eflow, update, timer);

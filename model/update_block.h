@@ -93,4 +93,8 @@ UpdateBlockOutput UpdateInChunks(UpdateBlock& block, const torch::Tensor& hidden
                                  const torch::Tensor& context, const torch::Tensor& correlation,
                                  const torch::Tensor& eflow, int64_t max_pixels);
 
+// The `max_pixels` DispMvsNet's CPU inference passes (a fine stage of 160x128
+// goes through in chunks of 3 pairs, a coarse one in a single call).
+inline constexpr int64_t kInferenceUpdatePixelsPerCall = int64_t{1} << 16;
+
 }  // namespace dispmvs::model
