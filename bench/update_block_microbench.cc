@@ -17,6 +17,10 @@
 //  * BM_BlockChannelsLast: weights and inputs in channels-last layout, which
 //                        lets oneDNN skip its layout conversions; slower
 //                        with LibTorch 1.13 on this CPU (docs/benchmarks.md).
+//  * BM_ContextTerms:    the context's share of the GRU gates, which the
+//                        block variants above take precomputed: the network
+//                        computes it once per reference and stage, so a
+//                        stage of T iterations adds 1/T of this per call.
 
 #include <cstdint>
 #include <string>
@@ -37,7 +41,7 @@ constexpr int64_t kSources = 5;
 
 struct Problem {
   UpdateBlock block{nullptr};
-  torch::Tensor hidden, context, cost, eflow;
+  torch::Tensor hidden, context, context_terms, cost, eflow;
 };
 
 Problem MakeProblem(const benchmark::State& state) {
@@ -54,7 +58,8 @@ Problem MakeProblem(const benchmark::State& state) {
   p.block = UpdateBlock(correlation, hidden, context, 4);
   p.block->eval();
   p.hidden = torch::randn({kSources, hidden, h, w}).tanh();
-  p.context = torch::randn({kSources, context, h, w}).relu();
+  p.context = torch::randn({1, context, h, w}).relu();  // one reference
+  p.context_terms = p.block->ContextTerms(p.context);
   p.cost = torch::randn({kSources, correlation, h, w});
   p.eflow = torch::randn({kSources, 1, h, w});
   return p;
@@ -69,7 +74,7 @@ void BM_Block(benchmark::State& state) {
   torch::NoGradGuard no_grad;
   Problem p = MakeProblem(state);
   for (auto _ : state) {
-    const UpdateBlockOutput out = p.block->forward(p.hidden, p.context, p.cost, p.eflow);
+    const UpdateBlockOutput out = p.block->forward(p.hidden, p.context_terms, p.cost, p.eflow);
     benchmark::DoNotOptimize(out.hidden.data_ptr());
   }
   Label(state);
@@ -80,7 +85,7 @@ void BM_BlockInChunks(benchmark::State& state) {
   Problem p = MakeProblem(state);
   for (auto _ : state) {
     const UpdateBlockOutput out = dispmvs::model::UpdateInChunks(
-        p.block, p.hidden, p.context, p.cost, p.eflow,
+        p.block, p.hidden, p.context_terms, p.cost, p.eflow,
         dispmvs::model::kInferenceUpdatePixelsPerCall);
     benchmark::DoNotOptimize(out.hidden.data_ptr());
   }
@@ -94,11 +99,22 @@ void BM_BlockChannelsLast(benchmark::State& state) {
   for (auto& parameter : p.block->parameters()) {
     if (parameter.dim() == 4) parameter.set_data(parameter.contiguous(layout));
   }
-  const torch::Tensor hidden = p.hidden.contiguous(layout), context = p.context.contiguous(layout),
-                      cost = p.cost.contiguous(layout), eflow = p.eflow.contiguous(layout);
+  const torch::Tensor hidden = p.hidden.contiguous(layout),
+                      terms = p.context_terms.contiguous(layout), cost = p.cost.contiguous(layout),
+                      eflow = p.eflow.contiguous(layout);
   for (auto _ : state) {
-    const UpdateBlockOutput out = p.block->forward(hidden, context, cost, eflow);
+    const UpdateBlockOutput out = p.block->forward(hidden, terms, cost, eflow);
     benchmark::DoNotOptimize(out.hidden.data_ptr());
+  }
+  Label(state);
+}
+
+void BM_ContextTerms(benchmark::State& state) {
+  torch::NoGradGuard no_grad;
+  Problem p = MakeProblem(state);
+  for (auto _ : state) {
+    const torch::Tensor terms = p.block->ContextTerms(p.context);
+    benchmark::DoNotOptimize(terms.data_ptr());
   }
   Label(state);
 }
@@ -111,6 +127,7 @@ void Shapes(benchmark::internal::Benchmark* b) {
 BENCHMARK(BM_Block)->Apply(Shapes);
 BENCHMARK(BM_BlockInChunks)->Apply(Shapes);
 BENCHMARK(BM_BlockChannelsLast)->Apply(Shapes);
+BENCHMARK(BM_ContextTerms)->Apply(Shapes);
 
 }  // namespace
 

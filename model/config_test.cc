@@ -54,6 +54,23 @@ TEST(ModelConfigTest, SmallIsNarrowerButSearchesTheSame) {
   EXPECT_EQ(small.fine_iterations, paper.fine_iterations);
 }
 
+// Model v2 at the small size: the small network with the match start and half
+// the paper's coarse iterations, everything else as Small().
+TEST(ModelConfigTest, SmallV2StartsFromTheMatchWithFourCoarseIterations) {
+  const ModelConfig small = ModelConfig::Small();
+  const ModelConfig v2 = ModelConfig::SmallV2();
+  EXPECT_NO_THROW(v2.Check());
+  EXPECT_EQ(v2.init, ModelConfig::Init::kMatch);
+  EXPECT_EQ(small.init, ModelConfig::Init::kRandom);
+  EXPECT_EQ(v2.coarse_iterations, 4);
+  EXPECT_EQ(v2.fine_iterations, small.fine_iterations);
+  ModelConfig same = v2;
+  same.name = small.name;
+  same.init = small.init;
+  same.coarse_iterations = small.coarse_iterations;
+  EXPECT_EQ(same.ToMetadata(), small.ToMetadata());
+}
+
 TEST(ModelConfigTest, CheckNamesTheBadField) {
   ModelConfig c;
   c.match_fine_channels = 0;

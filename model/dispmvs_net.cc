@@ -415,11 +415,16 @@ StageResult RunStage(const StageInput& in, UpdateBlock& block, StageTimer* timer
   }
   const StageSetup setup = SetUpStage(in, timer);
 
-  // Context: hidden state (tanh) and per-iteration input (relu), one copy per
-  // source pair.
+  // Context: the initial hidden state (tanh), one copy per source pair, and
+  // the GRU's input (relu), whose share of the gates is the same for every
+  // source and iteration: computed once per reference here.
   torch::Tensor hidden = RepeatPerSource(torch::tanh(in.context.narrow(1, 0, hid)), n);
-  const torch::Tensor context =
-      RepeatPerSource(torch::relu(in.context.narrow(1, hid, in.context.size(1) - hid)), n);
+  torch::Tensor context_terms;
+  {
+    const StageTimer::Section gru(timer, NetStage::kUpdate);
+    context_terms =
+        block->ContextTerms(torch::relu(in.context.narrow(1, hid, in.context.size(1) - hid)));
+  }
 
   torch::Tensor state = StartInverseDepth(in, setup, timer);  // [B,1,h,w], detached
   StageResult result;
@@ -448,8 +453,8 @@ StageResult RunStage(const StageInput& in, UpdateBlock& block, StageTimer* timer
       // holds the intermediates anyway), and so does a GPU, which has the
       // memory and wants the larger kernels.
       update = torch::GradMode::is_enabled() || hidden.is_cuda()
-                   ? block->forward(hidden, context, cost.cost, eflow)
-                   : UpdateInChunks(block, hidden, context, cost.cost, eflow,
+                   ? block->forward(hidden, context_terms, cost.cost, eflow)
+                   : UpdateInChunks(block, hidden, context_terms, cost.cost, eflow,
                                     kInferenceUpdatePixelsPerCall);
     }
     hidden = update.hidden;

@@ -28,8 +28,15 @@ void CheckInput(const torch::Tensor& t, const char* name, int64_t batch, int64_t
 
 }  // namespace
 
-SepConvGruImpl::SepConvGruImpl(int64_t hidden_channels, int64_t input_channels) {
-  const int64_t in = hidden_channels + input_channels;
+SepConvGruImpl::SepConvGruImpl(int64_t hidden_channels, int64_t motion_channels,
+                               int64_t context_channels)
+    : hidden_channels_(hidden_channels),
+      motion_channels_(motion_channels),
+      context_channels_(context_channels) {
+  if (hidden_channels < 1 || motion_channels < 1 || context_channels < 1) {
+    throw std::invalid_argument("SepConvGru: every channel count must be >= 1");
+  }
+  const int64_t in = hidden_channels + motion_channels + context_channels;
   convz1_ = register_module("convz1", Conv(in, hidden_channels, 1, 5));
   convr1_ = register_module("convr1", Conv(in, hidden_channels, 1, 5));
   convq1_ = register_module("convq1", Conv(in, hidden_channels, 1, 5));
@@ -38,18 +45,86 @@ SepConvGruImpl::SepConvGruImpl(int64_t hidden_channels, int64_t input_channels) 
   convq2_ = register_module("convq2", Conv(in, hidden_channels, 5, 1));
 }
 
-torch::Tensor SepConvGruImpl::Step(const torch::Tensor& hidden, const torch::Tensor& input,
-                                   nn::Conv2d& convz, nn::Conv2d& convr, nn::Conv2d& convq) {
-  const torch::Tensor hx = torch::cat({hidden, input}, 1);
-  const torch::Tensor z = torch::sigmoid(convz->forward(hx));
-  const torch::Tensor r = torch::sigmoid(convr->forward(hx));
-  const torch::Tensor q = torch::tanh(convq->forward(torch::cat({r * hidden, input}, 1)));
+torch::Tensor SepConvGruImpl::ContextTerms(const torch::Tensor& context) {
+  if (!context.defined() || context.dim() != 4 || context.size(1) != context_channels_) {
+    throw std::invalid_argument("SepConvGru: context must be [R," +
+                                std::to_string(context_channels_) + ",h,w]");
+  }
+  const int64_t first = hidden_channels_ + motion_channels_;
+  std::vector<torch::Tensor> passes;
+  for (const std::vector<nn::Conv2d*>& pass :
+       {std::vector<nn::Conv2d*>{&convz1_, &convr1_, &convq1_},
+        std::vector<nn::Conv2d*>{&convz2_, &convr2_, &convq2_}}) {
+    // One convolution per pass: the three gates' context columns stacked.
+    std::vector<torch::Tensor> weights, biases;
+    for (nn::Conv2d* conv : pass) {
+      weights.push_back((*conv)->weight.narrow(1, first, context_channels_));
+      biases.push_back((*conv)->bias);
+    }
+    const torch::Tensor weight = torch::cat(weights, 0);
+    passes.push_back(torch::conv2d(context, weight, torch::cat(biases, 0), /*stride=*/1,
+                                   /*padding=*/{weight.size(2) / 2, weight.size(3) / 2}));
+  }
+  return torch::cat(passes, 1);
+}
+
+namespace {
+
+// pre [B', C, h, w] + terms [R, C, h, w] broadcast over each reference's
+// B'/R pairs, in place (a convolution's output: autograd does not keep it).
+torch::Tensor AddPerReference(torch::Tensor pre, const torch::Tensor& terms) {
+  const int64_t refs = terms.size(0);
+  pre = pre.contiguous();  // a no-op for the NCHW maps the block makes
+  pre.view({refs, pre.size(0) / refs, pre.size(1), pre.size(2), pre.size(3)})
+      .add_(terms.unsqueeze(1));
+  return pre;
+}
+
+// The [hidden, motion] columns of a gate convolution's weight.
+torch::Tensor PairColumns(const nn::Conv2d& conv, int64_t columns) {
+  return conv->weight.narrow(1, 0, columns);
+}
+
+}  // namespace
+
+torch::Tensor SepConvGruImpl::Step(const torch::Tensor& hidden, const torch::Tensor& motion,
+                                   const torch::Tensor& terms, nn::Conv2d& convz,
+                                   nn::Conv2d& convr, nn::Conv2d& convq) {
+  const int64_t hid = hidden_channels_, columns = hidden_channels_ + motion_channels_;
+  const std::vector<int64_t> padding{convz->weight.size(2) / 2, convz->weight.size(3) / 2};
+  // z and r read the same input: one convolution with both weights stacked.
+  const torch::Tensor zr_weight =
+      torch::cat({PairColumns(convz, columns), PairColumns(convr, columns)}, 0);
+  const torch::Tensor zr = torch::sigmoid(AddPerReference(
+      torch::conv2d(torch::cat({hidden, motion}, 1), zr_weight, {}, 1, padding),
+      terms.narrow(1, 0, 2 * hid)));
+  const torch::Tensor z = zr.narrow(1, 0, hid);
+  const torch::Tensor r = zr.narrow(1, hid, hid);
+  const torch::Tensor q = torch::tanh(AddPerReference(
+      torch::conv2d(torch::cat({r * hidden, motion}, 1), PairColumns(convq, columns), {}, 1,
+                    padding),
+      terms.narrow(1, 2 * hid, hid)));
   return (1 - z) * hidden + z * q;
 }
 
-torch::Tensor SepConvGruImpl::forward(torch::Tensor hidden, const torch::Tensor& input) {
-  hidden = Step(hidden, input, convz1_, convr1_, convq1_);
-  return Step(hidden, input, convz2_, convr2_, convq2_);
+torch::Tensor SepConvGruImpl::forward(torch::Tensor hidden, const torch::Tensor& motion,
+                                      const torch::Tensor& context_terms) {
+  const int64_t hid = hidden_channels_;
+  if (!hidden.defined() || !motion.defined() || !context_terms.defined() || hidden.dim() != 4 ||
+      motion.dim() != 4 || context_terms.dim() != 4 || hidden.size(1) != hid ||
+      motion.size(1) != motion_channels_ || context_terms.size(1) != 6 * hid ||
+      motion.size(0) != hidden.size(0) || context_terms.size(0) < 1 ||
+      hidden.size(0) % context_terms.size(0) != 0 ||
+      motion.sizes().slice(2) != hidden.sizes().slice(2) ||
+      context_terms.sizes().slice(2) != hidden.sizes().slice(2)) {
+    throw std::invalid_argument(
+        "SepConvGru: need hidden [B'," + std::to_string(hid) + ",h,w], motion [B'," +
+        std::to_string(motion_channels_) + ",h,w] and context terms [R," +
+        std::to_string(6 * hid) + ",h,w] with B' a multiple of R");
+  }
+  hidden = Step(hidden, motion, context_terms.narrow(1, 0, 3 * hid), convz1_, convr1_, convq1_);
+  return Step(hidden, motion, context_terms.narrow(1, 3 * hid, 3 * hid), convz2_, convr2_,
+              convq2_);
 }
 
 UpdateBlockImpl::UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_channels,
@@ -76,7 +151,7 @@ UpdateBlockImpl::UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_ch
   eflow_conv2_ = register_module("eflow_conv2", Conv(flow1, flow2, 3));
   // hid - 1 channels, then the raw E-flow is appended: hid motion channels.
   motion_conv_ = register_module("motion_conv", Conv(corr2 + flow2, hid - 1, 3));
-  gru_ = register_module("gru", SepConvGru(hid, hid + context_channels));
+  gru_ = register_module("gru", SepConvGru(hid, hid, context_channels));
   head_conv1_ = register_module("head_conv1", Conv(hid, 2 * hid, 3));
   head_conv2_ = register_module("head_conv2", Conv(2 * hid, 2, 3));
   mask_conv1_ = register_module("mask_conv1", Conv(hid, 2 * hid, 3));
@@ -84,8 +159,12 @@ UpdateBlockImpl::UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_ch
       register_module("mask_conv2", Conv(2 * hid, 9 * upsample_factor * upsample_factor, 1));
 }
 
+torch::Tensor UpdateBlockImpl::ContextTerms(const torch::Tensor& context) {
+  return gru_->ContextTerms(context);
+}
+
 UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
-                                           const torch::Tensor& context,
+                                           const torch::Tensor& context_terms,
                                            const torch::Tensor& correlation,
                                            const torch::Tensor& eflow) {
   if (!hidden.defined() || hidden.dim() != 4) {
@@ -95,7 +174,12 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
   const int64_t h = hidden.size(2);
   const int64_t w = hidden.size(3);
   CheckInput(hidden, "hidden", batch, hidden_channels_, h, w);
-  CheckInput(context, "context", batch, context_channels_, h, w);
+  if (!context_terms.defined() || context_terms.dim() != 4 || context_terms.size(0) < 1 ||
+      batch % context_terms.size(0) != 0) {
+    throw std::invalid_argument(
+        "UpdateBlock: context_terms must be [R,...] with the batch a multiple of R");
+  }
+  CheckInput(context_terms, "context_terms", context_terms.size(0), 6 * hidden_channels_, h, w);
   CheckInput(correlation, "correlation", batch, correlation_channels_, h, w);
   CheckInput(eflow, "eflow", batch, 1, h, w);
 
@@ -107,7 +191,7 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
       torch::cat({torch::relu(motion_conv_->forward(torch::cat({corr, flow}, 1))), eflow}, 1);
 
   UpdateBlockOutput out;
-  out.hidden = gru_->forward(hidden, torch::cat({motion, context}, 1));
+  out.hidden = gru_->forward(hidden, motion, context_terms);
   const torch::Tensor heads =
       head_conv2_->forward(torch::relu(head_conv1_->forward(out.hidden)));
   out.delta_eflow = heads.narrow(1, 0, 1);
@@ -116,24 +200,35 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
 }
 
 UpdateBlockOutput UpdateInChunks(UpdateBlock& block, const torch::Tensor& hidden,
-                                 const torch::Tensor& context, const torch::Tensor& correlation,
-                                 const torch::Tensor& eflow, int64_t max_pixels) {
-  if (!hidden.defined() || hidden.dim() != 4) {
-    throw std::invalid_argument("UpdateInChunks: hidden must be [B,C,h,w]");
+                                 const torch::Tensor& context_terms,
+                                 const torch::Tensor& correlation, const torch::Tensor& eflow,
+                                 int64_t max_pixels) {
+  if (!hidden.defined() || hidden.dim() != 4 || !context_terms.defined() ||
+      context_terms.dim() != 4 || context_terms.size(0) < 1 ||
+      hidden.size(0) % context_terms.size(0) != 0) {
+    throw std::invalid_argument(
+        "UpdateInChunks: hidden must be [B',C,h,w] and context_terms [R,...] with B' a "
+        "multiple of R");
   }
   const int64_t pairs = hidden.size(0);
+  const int64_t references = context_terms.size(0);
+  const int64_t pairs_per_reference = pairs / references;
   const int64_t pixels = std::max<int64_t>(hidden.size(2) * hidden.size(3), 1);
   const int64_t chunk = std::max<int64_t>(1, max_pixels / pixels);
-  if (chunk >= pairs) return block->forward(hidden, context, correlation, eflow);
+  if (chunk >= pairs) return block->forward(hidden, context_terms, correlation, eflow);
   std::vector<torch::Tensor> hiddens, deltas, logits;
-  for (int64_t start = 0; start < pairs; start += chunk) {
-    const int64_t n = std::min(chunk, pairs - start);
-    const UpdateBlockOutput part =
-        block->forward(hidden.narrow(0, start, n), context.narrow(0, start, n),
-                       correlation.narrow(0, start, n), eflow.narrow(0, start, n));
-    hiddens.push_back(part.hidden);
-    deltas.push_back(part.delta_eflow);
-    logits.push_back(part.weight_logit);
+  for (int64_t reference = 0; reference < references; ++reference) {
+    const torch::Tensor terms = context_terms.narrow(0, reference, 1);
+    for (int64_t offset = 0; offset < pairs_per_reference; offset += chunk) {
+      const int64_t start = reference * pairs_per_reference + offset;
+      const int64_t n = std::min(chunk, pairs_per_reference - offset);
+      const UpdateBlockOutput part =
+          block->forward(hidden.narrow(0, start, n), terms, correlation.narrow(0, start, n),
+                         eflow.narrow(0, start, n));
+      hiddens.push_back(part.hidden);
+      deltas.push_back(part.delta_eflow);
+      logits.push_back(part.weight_logit);
+    }
   }
   UpdateBlockOutput out;
   out.hidden = torch::cat(hiddens, 0);

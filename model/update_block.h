@@ -22,17 +22,42 @@ namespace dispmvs::model {
 
 // GRU whose gates are two separable convolutions: first 1x5 (horizontal
 // context), then 5x1 (vertical), each a full GRU step (paper Eq. 17, in the
-// supplement; docs/method.md section 7).
+// supplement; docs/method.md section 7). Its input is [motion, context].
+//
+// The context is the same for every source view and every iteration of a
+// stage, so its share of the six gate convolutions (a third of their
+// multiply-adds in the shipped configurations) is computed once per
+// reference and stage by ContextTerms() and added to each pair's
+// convolution of [hidden, motion]. That is the convolution over the whole
+// concatenation [hidden, motion, context], its sums taken in another order:
+// equal up to float rounding, same weights, same parameter names.
 class SepConvGruImpl : public torch::nn::Module {
  public:
-  SepConvGruImpl(int64_t hidden_channels, int64_t input_channels);
-  torch::Tensor forward(torch::Tensor hidden, const torch::Tensor& input);
+  SepConvGruImpl(int64_t hidden_channels, int64_t motion_channels, int64_t context_channels);
+
+  // context [R, context, h, w] -> [R, 6*hidden, h, w]: the context's share
+  // of the gates z, r, q of the 1x5 pass, then of the 5x1 pass, biases
+  // included.
+  torch::Tensor ContextTerms(const torch::Tensor& context);
+
+  // hidden [B', hidden, h, w], motion [B', motion, h, w], context_terms
+  // [R, 6*hidden, h, w] from ContextTerms(), with B' a multiple of R: pairs
+  // r*(B'/R) ... (r+1)*(B'/R)-1 share the context of reference r.
+  torch::Tensor forward(torch::Tensor hidden, const torch::Tensor& motion,
+                        const torch::Tensor& context_terms);
+
+  int64_t hidden_channels() const { return hidden_channels_; }
+  int64_t motion_channels() const { return motion_channels_; }
+  int64_t context_channels() const { return context_channels_; }
 
  private:
-  torch::Tensor Step(const torch::Tensor& hidden, const torch::Tensor& input,
-                     torch::nn::Conv2d& convz, torch::nn::Conv2d& convr,
-                     torch::nn::Conv2d& convq);
+  torch::Tensor Step(const torch::Tensor& hidden, const torch::Tensor& motion,
+                     const torch::Tensor& terms, torch::nn::Conv2d& convz,
+                     torch::nn::Conv2d& convr, torch::nn::Conv2d& convq);
 
+  int64_t hidden_channels_;
+  int64_t motion_channels_;
+  int64_t context_channels_;
   torch::nn::Conv2d convz1_{nullptr}, convr1_{nullptr}, convq1_{nullptr};
   torch::nn::Conv2d convz2_{nullptr}, convr2_{nullptr}, convq2_{nullptr};
 };
@@ -53,9 +78,16 @@ class UpdateBlockImpl : public torch::nn::Module {
   UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_channels,
                   int64_t context_channels, int64_t upsample_factor);
 
-  // hidden [B',hidden,h,w], context [B',context,h,w] (already relu'd),
-  // correlation [B',correlation_channels,h,w], eflow [B',1,h,w].
-  UpdateBlockOutput forward(const torch::Tensor& hidden, const torch::Tensor& context,
+  // The context's share of the GRU gates, [R, 6*hidden, h, w], from the
+  // references' context [R, context_channels, h, w] (already relu'd):
+  // computed once per stage and passed to every forward() of the stage.
+  torch::Tensor ContextTerms(const torch::Tensor& context);
+
+  // hidden [B',hidden,h,w], context_terms [R,6*hidden,h,w] from
+  // ContextTerms() with B' a multiple of R (pairs r*(B'/R) ... of reference
+  // r, as the driver folds sources into the batch), correlation
+  // [B',correlation_channels,h,w], eflow [B',1,h,w].
+  UpdateBlockOutput forward(const torch::Tensor& hidden, const torch::Tensor& context_terms,
                             const torch::Tensor& correlation, const torch::Tensor& eflow);
 
   // Convex-upsampling mask logits [B', 9*f*f, h, w] from a hidden state.
@@ -83,14 +115,16 @@ class UpdateBlockImpl : public torch::nn::Module {
 };
 TORCH_MODULE(UpdateBlock);
 
-// block->forward() on a few pairs at a time: chunks of the batch of at most
-// max(1, max_pixels / (h * w)) pairs, outputs concatenated. The pairs are
-// independent in the block, so the result is the whole-batch call's (up to
-// float rounding), while the block's intermediate maps (hundreds of channels
-// per pair) shrink to one chunk's: the inference driver's way to bound
-// memory at large image sizes on the CPU (docs/benchmarks.md).
+// block->forward() on a few pairs at a time: chunks of at most
+// max(1, max_pixels / (h * w)) pairs of one reference each, outputs
+// concatenated. The pairs are independent in the block, so the result is the
+// whole-batch call's (up to float rounding), while the block's intermediate
+// maps (hundreds of channels per pair) shrink to one chunk's: the inference
+// driver's way to bound memory at large image sizes on the CPU
+// (docs/benchmarks.md).
 UpdateBlockOutput UpdateInChunks(UpdateBlock& block, const torch::Tensor& hidden,
-                                 const torch::Tensor& context, const torch::Tensor& correlation,
+                                 const torch::Tensor& context_terms,
+                                 const torch::Tensor& correlation,
                                  const torch::Tensor& eflow, int64_t max_pixels);
 
 // The `max_pixels` DispMvsNet's CPU inference passes (a fine stage of 160x128

@@ -36,6 +36,9 @@ options (default):
                               training only, evaluation reads it from WEIGHTS
   --widenings LIST            evaluation only: comma-separated x values, 'none' = no hint at all
                               (v2 weights only) (1,2,3)
+  --eval_coarse_iterations K  evaluation only: GRU iterations of the coarse stage, 0 = the weights' (0)
+  --eval_fine_iterations K    evaluation only: the same for the fine stage (the speed knob of
+                              dispmvs_colmap --fine_iterations) (0)
   --height H --width W        image size (128, 160)
   --sources N                 source views per sample (4)
   --batch B                   samples per step (1)
@@ -182,6 +185,8 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--matching_loss_weight") o.matching_loss_weight = ParseDouble(flag, value);
     else if (flag == "--matching_warmup_steps") o.matching_warmup_steps = ParseInt(flag, value);
     else if (flag == "--scene_reuse") o.scene_reuse = ParseInt(flag, value);
+    else if (flag == "--eval_coarse_iterations") o.eval_coarse_iterations = ParseInt(flag, value);
+    else if (flag == "--eval_fine_iterations") o.eval_fine_iterations = ParseInt(flag, value);
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
     else if (flag == "--difficulty_ramp_steps") o.difficulty_ramp_steps = ParseInt(flag, value);

@@ -562,6 +562,14 @@ void TrainOptions::Check(bool for_training) const {
   if (train_coarse_iterations < 0 || train_coarse_iterations > 1000) {
     fail("train_coarse_iterations must be in [0, 1000], got " + std::to_string(train_coarse_iterations));
   }
+  for (const auto& [name, value] : {std::pair<const char*, int64_t>{"eval_coarse_iterations",
+                                                                     eval_coarse_iterations},
+                                    {"eval_fine_iterations", eval_fine_iterations}}) {
+    if (value < 0 || value > 1000) {
+      fail(std::string(name) + " must be in [0, 1000], got " + std::to_string(value));
+    }
+    if (value > 0 && for_training) fail(std::string(name) + " is for evaluation only");
+  }
   if (scene_reuse < 1 || scene_reuse > 64) fail("scene_reuse must be in [1, 64], got " + std::to_string(scene_reuse));
   if (!(std::isfinite(max_cpu_minutes) && max_cpu_minutes >= 0)) {
     fail("max_cpu_minutes must be a finite number >= 0, got " + std::to_string(max_cpu_minutes));
@@ -855,8 +863,12 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
   const torch::Device device = model::ParseUsableDevice(options.device);
   if (options.num_validation_scenes < 1) throw std::invalid_argument("num_validation_scenes must be >= 1");
   SetThreads(options.threads);
-  DispMvsNet net(model::ReadModelConfig(weights_path));
+  const ModelConfig config = model::ReadModelConfig(weights_path);
+  DispMvsNet net(config);
   model::LoadModuleWeights(*net, weights_path);
+  net->set_iterations(
+      options.eval_coarse_iterations > 0 ? options.eval_coarse_iterations : config.coarse_iterations,
+      options.eval_fine_iterations > 0 ? options.eval_fine_iterations : config.fine_iterations);
   net->to(device);
   const auto scenes = ValidationScenes(options, device);
   return Validate(net, scenes, options, widenings);

@@ -88,6 +88,11 @@ struct TrainOptions {
   // GRU iterations of the coarse stage in training steps (0 = the config's):
   // cheaper steps; validation and the saved weights keep the config's.
   int64_t train_coarse_iterations = 0;
+  // Evaluation only (EvaluateWeights): GRU iterations of each stage, 0 = the
+  // weights' config's. Fewer fine iterations are the network's speed knob
+  // (dispmvs_colmap --fine_iterations); this measures what they cost.
+  int64_t eval_coarse_iterations = 0;
+  int64_t eval_fine_iterations = 0;
   // Curriculum (synth::SynthConfig::difficulty): generated training scenes
   // start at difficulty_start and reach full difficulty (1) linearly over
   // difficulty_ramp_steps steps. Validation is always at full difficulty.

@@ -137,6 +137,15 @@ TEST(TrainerTest, EvaluateWeightsGivesOneRowPerWidening) {
   EXPECT_EQ(rows[0].metrics.gt_pixels, rows[1].metrics.gt_pixels);
   EXPECT_GT(rows[0].metrics.gt_pixels, 0);
   EXPECT_GE(rows[0].metrics.coverage, rows[0].metrics.within_5);
+
+  // Fewer GRU iterations change the result: the override reaches the network.
+  options.eval_coarse_iterations = 1;
+  options.eval_fine_iterations = 1;
+  const auto fewer = EvaluateWeights((fs::path(options.checkpoint_dir) / "model.safetensors").string(),
+                                     options, {1});
+  ASSERT_EQ(fewer.size(), 1u);
+  EXPECT_EQ(fewer[0].metrics.gt_pixels, rows[0].metrics.gt_pixels);
+  EXPECT_NE(fewer[0].metrics.abs_rel, rows[0].metrics.abs_rel);
 }
 
 TrainOptions TinyV2Options(const fs::path& dir, int64_t steps) {
@@ -297,8 +306,16 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o.lr_warmup_steps = -1;
   ExpectRejected(o, "lr_warmup_steps");
   o = good;
+  o.eval_fine_iterations = 1;
+  ExpectRejected(o, "eval_fine_iterations is for evaluation only");
+  o = good;
+  o.eval_coarse_iterations = -1;
+  ExpectRejected(o, "eval_coarse_iterations");
+  o = good;
   o.checkpoint_dir.clear();
   ExpectRejected(o, "checkpoint_dir");
+  EXPECT_NO_THROW(o.Check(/*for_training=*/false));
+  o.eval_fine_iterations = 1;
   EXPECT_NO_THROW(o.Check(/*for_training=*/false));
 }
 
