@@ -4,22 +4,25 @@
 # only when every shard has succeeded.
 #
 #   submit.sh --workspace_path WS --shards N [--cpus_per_task C]
-#             [--log_dir DIR] [--program PATH] [--wait] [-- dispmvs_colmap options]
+#             [--log_dir DIR] [--program PATH] [--wait [--give_up_after S]]
+#             [-- dispmvs_colmap options]
 #
 # Options after `--` go to both jobs (e.g. --max_image_size 1600 --model_path F).
 # Partition, account, time limit and the like come from sbatch's own
 # environment variables (SBATCH_PARTITION, SBATCH_ACCOUNT, SBATCH_TIMELIMIT).
 # Prints the two job ids. With --wait it returns when the fusion job ends:
 # 0 when it completed, 1 when it failed or was cancelled (Slurm cancels it
-# when a shard fails). Submitting again resumes: finished views are kept.
+# when a shard fails), or when scontrol has reported no state for the job
+# for S seconds (default 600: the controller is down, or forgot the job).
+# Submitting again resumes: finished views are kept.
 set -euo pipefail
 
 here=$(cd "$(dirname "$0")" && pwd)
 usage() {
-  sed -n '2,14p' "$0" | sed 's/^# \{0,1\}//' >&2
+  sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//' >&2
   exit 2
 }
-workspace="" shards="" cpus=4 log_dir="" program="" wait=0
+workspace="" shards="" cpus=4 log_dir="" program="" wait=0 give_up_after=600
 while [ $# -gt 0 ]; do
   case $1 in
     --workspace_path) workspace=${2:?}; shift 2 ;;
@@ -28,14 +31,16 @@ while [ $# -gt 0 ]; do
     --log_dir) log_dir=${2:?}; shift 2 ;;
     --program) program=${2:?}; shift 2 ;;
     --wait) wait=1; shift ;;
+    --give_up_after) give_up_after=${2:?}; shift 2 ;;
     --) shift; break ;;
     -h|--help) usage ;;
     *) echo "submit.sh: unknown option $1 (dispmvs_colmap options go after --)" >&2; usage ;;
   esac
 done
 if [ -z "$workspace" ] || [ -z "$shards" ]; then usage; fi
-if ! [[ $shards =~ ^[1-9][0-9]*$ ]] || ! [[ $cpus =~ ^[1-9][0-9]*$ ]]; then
-  echo "submit.sh: --shards and --cpus_per_task must be positive integers" >&2
+if ! [[ $shards =~ ^[1-9][0-9]*$ ]] || ! [[ $cpus =~ ^[1-9][0-9]*$ ]] ||
+   ! [[ $give_up_after =~ ^[1-9][0-9]*$ ]]; then
+  echo "submit.sh: --shards, --cpus_per_task and --give_up_after must be positive integers" >&2
   exit 2
 fi
 if [ ! -d "$workspace/images" ] || [ ! -d "$workspace/sparse" ]; then
@@ -70,12 +75,25 @@ echo "fusion: job $fuse_job (after the array)"
 # Wait for the fusion job. `sbatch --wait` is not used: it returns 0 for a
 # job cancelled before it started, which is what Slurm does to the fusion job
 # when a shard fails (--kill-on-invalid-dep). The job's final state decides.
+# scontrol reports nothing while the controller is unreachable, and forgets
+# a job some minutes after it ends (MinJobAge): after --give_up_after seconds
+# of that, stop waiting rather than wait forever.
 echo "fusion: waiting for job $fuse_job"
+last_answer=$SECONDS
 while :; do
   info=$(scontrol show job -o "$fuse_job" 2> /dev/null || true)
   state=$(grep -o 'JobState=[A-Z_]*' <<< "$info" | cut -d= -f2 || true)
   case $state in
-    PENDING|CONFIGURING|RUNNING|COMPLETING|REQUEUED|RESIZING|SUSPENDED|"") sleep 2 ;;
+    "")
+      if (( SECONDS - last_answer >= give_up_after )); then
+        echo "submit.sh: scontrol has not reported job $fuse_job for ${give_up_after} s;" \
+          "stopped waiting (the jobs themselves are not touched): ask the cluster" \
+          "(sacct -j $fuse_job), see the logs in $log_dir" >&2
+        exit 1
+      fi
+      sleep 2 ;;
+    PENDING|CONFIGURING|RUNNING|COMPLETING|REQUEUED|RESIZING|SUSPENDED)
+      last_answer=$SECONDS; sleep 2 ;;
     COMPLETED) echo "fusion: job $fuse_job completed"; exit 0 ;;
     *)
       reason=$(grep -o 'Reason=[^ ]*' <<< "$info" | cut -d= -f2 || true)
