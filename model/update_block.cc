@@ -10,6 +10,13 @@ namespace {
 
 namespace nn = torch::nn;
 
+// Zero padding that keeps the map size for an odd kernel, as Conv() sets it:
+// the functional convolutions of the split GRU use the modules' weights with
+// the modules' padding.
+std::vector<int64_t> SamePadding(const torch::Tensor& weight) {
+  return {weight.size(2) / 2, weight.size(3) / 2};
+}
+
 nn::Conv2d Conv(int64_t in, int64_t out, int64_t kernel_h, int64_t kernel_w) {
   return nn::Conv2d(nn::Conv2dOptions(in, out, {kernel_h, kernel_w})
                         .padding({kernel_h / 2, kernel_w / 2}));
@@ -62,8 +69,8 @@ torch::Tensor SepConvGruImpl::ContextTerms(const torch::Tensor& context) {
       biases.push_back((*conv)->bias);
     }
     const torch::Tensor weight = torch::cat(weights, 0);
-    passes.push_back(torch::conv2d(context, weight, torch::cat(biases, 0), /*stride=*/1,
-                                   /*padding=*/{weight.size(2) / 2, weight.size(3) / 2}));
+    passes.push_back(
+        torch::conv2d(context, weight, torch::cat(biases, 0), /*stride=*/1, SamePadding(weight)));
   }
   return torch::cat(passes, 1);
 }
@@ -91,7 +98,7 @@ torch::Tensor SepConvGruImpl::Step(const torch::Tensor& hidden, const torch::Ten
                                    const torch::Tensor& terms, nn::Conv2d& convz,
                                    nn::Conv2d& convr, nn::Conv2d& convq) {
   const int64_t hid = hidden_channels_, columns = hidden_channels_ + motion_channels_;
-  const std::vector<int64_t> padding{convz->weight.size(2) / 2, convz->weight.size(3) / 2};
+  const std::vector<int64_t> padding = SamePadding(convz->weight);
   // z and r read the same input: one convolution with both weights stacked.
   const torch::Tensor zr_weight =
       torch::cat({PairColumns(convz, columns), PairColumns(convr, columns)}, 0);
@@ -131,7 +138,6 @@ UpdateBlockImpl::UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_ch
                                  int64_t context_channels, int64_t upsample_factor)
     : correlation_channels_(correlation_channels),
       hidden_channels_(hidden_channels),
-      context_channels_(context_channels),
       upsample_factor_(upsample_factor) {
   if (correlation_channels < 1 || hidden_channels < 2 || context_channels < 1 ||
       upsample_factor < 1) {

@@ -46,10 +46,6 @@ class SepConvGruImpl : public torch::nn::Module {
   torch::Tensor forward(torch::Tensor hidden, const torch::Tensor& motion,
                         const torch::Tensor& context_terms);
 
-  int64_t hidden_channels() const { return hidden_channels_; }
-  int64_t motion_channels() const { return motion_channels_; }
-  int64_t context_channels() const { return context_channels_; }
-
  private:
   torch::Tensor Step(const torch::Tensor& hidden, const torch::Tensor& motion,
                      const torch::Tensor& terms, torch::nn::Conv2d& convz,
@@ -101,7 +97,6 @@ class UpdateBlockImpl : public torch::nn::Module {
  private:
   int64_t correlation_channels_;
   int64_t hidden_channels_;
-  int64_t context_channels_;
   int64_t upsample_factor_;
 
   // Motion encoder.
