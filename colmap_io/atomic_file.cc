@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <system_error>
+#include <vector>
 
 #include "colmap_io/error.h"
 
@@ -54,6 +55,24 @@ void WriteFileAtomically(const std::filesystem::path& path,
   AtomicFileWriter writer(path);
   write(writer.stream());
   writer.Commit();
+}
+
+int RemoveLeftoverTemporaries(const std::filesystem::path& path) {
+  const std::filesystem::path folder = path.has_parent_path() ? path.parent_path() : ".";
+  const std::string prefix = path.filename().string() + ".tmp-";
+  std::error_code ec;
+  if (!std::filesystem::is_directory(folder, ec)) return 0;
+  std::vector<std::filesystem::path> leftovers;
+  std::filesystem::directory_iterator entries(folder, ec);
+  if (ec) throw IoError(folder.string(), "cannot list: " + ec.message());
+  for (const auto& entry : entries) {
+    if (entry.path().filename().string().rfind(prefix, 0) == 0) leftovers.push_back(entry.path());
+  }
+  for (const std::filesystem::path& leftover : leftovers) {
+    std::filesystem::remove(leftover, ec);
+    if (ec) throw IoError(leftover.string(), "cannot remove a leftover temporary file: " + ec.message());
+  }
+  return static_cast<int>(leftovers.size());
 }
 
 }  // namespace dispmvs::colmap_io

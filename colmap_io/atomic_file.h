@@ -39,4 +39,12 @@ class AtomicFileWriter {
 void WriteFileAtomically(const std::filesystem::path& path,
                          const std::function<void(std::ostream&)>& write);
 
+// Removes the temporary files that writers of `path` left beside it
+// ("NAME.tmp-*" with NAME = path's file name; a killed process cannot clean
+// up). Only for a caller that knows no other process is writing `path` now
+// (e.g. one holding the path's per-view claim): a live writer's temporary
+// would be deleted under it. Returns how many were removed; a missing folder
+// is none. Throws IoError when the folder cannot be listed or a file removed.
+int RemoveLeftoverTemporaries(const std::filesystem::path& path);
+
 }  // namespace dispmvs::colmap_io

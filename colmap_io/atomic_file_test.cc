@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <stdexcept>
 #include <string>
@@ -105,6 +106,41 @@ TEST(AtomicFileTest, FailedRenameIsAnIoErrorAndRemovesTemporary) {
   EXPECT_THROW(WriteFileAtomically(path, [](std::ostream& out) { out << "data"; }), IoError);
   EXPECT_EQ(ListDirectory(dir.path()), std::vector<std::string>{"occupied"});
   EXPECT_TRUE(std::filesystem::is_directory(path));
+}
+
+TEST(AtomicFileTest, RemoveLeftoverTemporariesTakesOnlyThatFilesTemporaries) {
+  TempDir dir;
+  const auto path = dir.path() / "out.bin";
+  WriteFileBytes(path, "complete");
+  WriteFileBytes(dir.path() / "out.bin.tmp-4242-0", "killed writer");
+  WriteFileBytes(dir.path() / "out.bin.tmp-77-13", "another killed writer");
+  // Other files' temporaries and look-alikes stay.
+  WriteFileBytes(dir.path() / "out.bin.vis.tmp-4242-1", "x");
+  WriteFileBytes(dir.path() / "out.bin2.tmp-1-0", "x");
+  WriteFileBytes(dir.path() / "xout.bin.tmp-1-0", "x");
+  EXPECT_EQ(RemoveLeftoverTemporaries(path), 2);
+  std::vector<std::string> left = ListDirectory(dir.path());
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{"out.bin", "out.bin.vis.tmp-4242-1", "out.bin2.tmp-1-0",
+                                            "xout.bin.tmp-1-0"}));
+  EXPECT_EQ(ReadFileBytes(path), "complete");
+  EXPECT_EQ(RemoveLeftoverTemporaries(path), 0);
+  EXPECT_EQ(RemoveLeftoverTemporaries(dir.path() / "missing" / "out.bin"), 0);
+}
+
+TEST(AtomicFileTest, RemoveLeftoverTemporariesFindsTheWritersOwnNames) {
+  // The names it removes are the ones AtomicFileWriter makes: here a live
+  // writer's, which is why only a caller that excludes other writers may
+  // call it (the writer's Commit then fails instead of writing).
+  TempDir dir;
+  const auto path = dir.path() / "late.txt";
+  AtomicFileWriter writer(path);
+  writer.stream() << "data";
+  writer.stream().flush();
+  EXPECT_EQ(RemoveLeftoverTemporaries(path), 1);
+  EXPECT_TRUE(ListDirectory(dir.path()).empty());
+  EXPECT_THROW(writer.Commit(), IoError);
+  EXPECT_FALSE(std::filesystem::exists(path));
 }
 
 }  // namespace

@@ -1,11 +1,13 @@
 #include "dense/photometric_pass.h"
 
 #include <cmath>
+#include <filesystem>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "colmap_io/atomic_file.h"
 #include "colmap_io/dense_array.h"
 #include "colmap_io/view_record.h"
 #include "dense/view_claim.h"
@@ -97,6 +99,15 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
         log << ": written by another process meanwhile, kept\n" << std::flush;
         continue;
       }
+      // Holding the claim, no other process writes this view's files: any
+      // temporaries beside them are a killed run's, and go.
+      const MapPaths paths = PathsOf(workspace, name, kPhotometricType);
+      const std::filesystem::path record_path = ViewRecordPath(workspace, name);
+      int leftovers = 0;
+      for (const std::filesystem::path& path :
+           {paths.depth, paths.normal, paths.confidence, record_path}) {
+        leftovers += RemoveLeftoverTemporaries(path);
+      }
       // None without sparse points or --depth_min/--depth_max: fine for
       // model v2 weights (checked above for the others).
       const std::optional<DepthRange> hint = plan.HintFor(reference);
@@ -105,8 +116,7 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       const DepthEstimate estimate =
           estimator.Estimate(views, hint, ViewSeed(options.seed, reference));
       const DenseArray normal = fusion::NormalMapFromDepth(estimate.depth, views[0].K);
-      WriteMaps(PathsOf(workspace, name, kPhotometricType), estimate.depth, normal,
-                estimate.confidence);
+      WriteMaps(paths, estimate.depth, normal, estimate.confidence);
       // For the run report; after the maps, so a complete view never waits
       // on it (a view killed in between just has no time in the report).
       ViewRecord record;
@@ -117,7 +127,7 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       record.device = options.estimator.device;
       std::string record_note;
       try {  // only the report needs it: not a reason to fail the view
-        WriteViewRecord(ViewRecordPath(workspace, name), record);
+        WriteViewRecord(record_path, record);
       } catch (const std::exception& error) {
         record_note = std::string(" (time not recorded: ") + error.what() + ")";
       }
@@ -126,9 +136,11 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       log << ": " << FormatSeconds(record.seconds) << ", "
           << views[0].image.cols << "x" << views[0].image.rows << ", depth at "
           << Percent(ValidFraction(estimate.depth)) << " of pixels, ETA "
-          << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << record_note
-          << '\n'
-          << std::flush;
+          << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << record_note;
+      if (leftovers > 0) {
+        log << " (" << leftovers << " temporary file(s) of an interrupted run removed)";
+      }
+      log << '\n' << std::flush;
     } catch (const std::exception& error) {
       summary.failures.push_back(name + ": " + error.what());
       log << ": FAILED: " << error.what() << '\n' << std::flush;

@@ -119,16 +119,28 @@ TEST_F(PhotometricPassTest, UnreadableImageFailsTheViewsThatNeedIt) {
 }
 
 // A view claimed by another process (here: this test, holding its lock) is
-// skipped and said so; once released, a rerun computes just that view.
+// skipped and said so; once released, a rerun computes just that view and
+// clears what its holder left.
 TEST_F(PhotometricPassTest, SkipsAViewAnotherProcessHasClaimed) {
   const std::string& held = names_[2];
   std::optional<ViewClaim> claim = ViewClaim::TryClaim(ClaimPath(workspace_, held));
   ASSERT_TRUE(claim.has_value());
+  // The holder's temporaries, as it writes (or as it left them, killed):
+  // untouched while it holds the view, removed by the run that claims it next.
+  const MapPaths held_paths = PathsOf(workspace_, held, kPhotometricType);
+  const std::vector<fs::path> temporaries = {
+      held_paths.depth.string() + ".tmp-999999-0", held_paths.normal.string() + ".tmp-999999-1",
+      colmap_io::ViewRecordPath(workspace_, held).string() + ".tmp-999999-2"};
+  for (const fs::path& path : temporaries) {
+    fs::create_directories(path.parent_path());
+    std::ofstream(path) << "partial";
+  }
   const PassSummary first = RunPhotometricPass(workspace_, plan_, options_, log_);
   EXPECT_EQ(first.done, 6) << log_.str();
   EXPECT_EQ(first.skipped_claimed, 1);
   EXPECT_TRUE(first.failures.empty());
   EXPECT_FALSE(fs::exists(PathsOf(workspace_, held, kPhotometricType).depth));
+  for (const fs::path& path : temporaries) EXPECT_TRUE(fs::exists(path)) << path;
   EXPECT_NE(log_.str().find(held + " (4 sources): skipped, another process (pid " +
                             std::to_string(::getpid()) + ") is computing it"),
             std::string::npos)
@@ -140,6 +152,10 @@ TEST_F(PhotometricPassTest, SkipsAViewAnotherProcessHasClaimed) {
   EXPECT_EQ(second.skipped_existing, 6);
   EXPECT_EQ(second.skipped_claimed, 0);
   EXPECT_TRUE(PathsOf(workspace_, held, kPhotometricType).AllExist());
+  for (const fs::path& path : temporaries) EXPECT_FALSE(fs::exists(path)) << path;
+  EXPECT_NE(log_.str().find("(3 temporary file(s) of an interrupted run removed)"),
+            std::string::npos)
+      << log_.str();
 }
 
 TEST(ViewSeedTest, DependsOnRunSeedAndImageOnly) {
