@@ -35,6 +35,9 @@
 set -euo pipefail
 
 die() { echo "depth_range_robustness: $*" >&2; exit 1; }
+# shellcheck source=eval_pooling.sh
+source "$(dirname "$0")/eval_pooling.sh"
+types="dispmvs.photometric dispmvs.geometric"
 
 [ $# -ge 2 ] || die "usage: $0 BUILD_DIR OUT_DIR [--scenes K] [--seed S] [--width W] [--height H] [--views V] [--sources N] [--widenings \"1 2 3\"] [--model PATH] [-- dispmvs_colmap args]"
 build=$(cd "$1" && pwd) || die "no build directory $1"
@@ -93,7 +96,7 @@ for x in $widenings; do
         die "dispmvs_colmap failed on $ws (see $ws/dispmvs_colmap.log)"
       tail -n 3 "$ws/dispmvs_colmap.log"
       "$build/src/dispmvs_eval" --workspace_path "$ws" \
-        --types dispmvs.photometric,dispmvs.geometric --ply "$ws/fused.ply" \
+        --types "${types// /,}" --ply "$ws/fused.ply" \
         --json "$ws/eval.json" --tsv "$ws/eval.tsv.tmp" > "$ws/eval.txt" ||
         die "dispmvs_eval failed on $ws"
       mv "$ws/eval.tsv.tmp" "$ws/eval.tsv"
@@ -102,33 +105,23 @@ for x in $widenings; do
 done
 
 # One table row per widening and map type, then one per widening for the
-# clouds. The GT diagonal of each scene comes from its eval.json.
+# clouds (bench/eval_pooling.sh).
 {
   echo "Depth-range robustness: $scenes generated scenes (seed $seed), ${width}x${height}, N = $sources sources, hint [d_min / x, d_max * x]"
   echo
   echo "| x | maps | coverage | AbsRel | <1 % | <2 % | <5 % |"
   echo "|---|---|---|---|---|---|---|"
   for x in $widenings; do
-    cat "$out/x$x"/scene_*/eval.tsv | awk -F'\t' -v x="$x" '
-      $1 == "depth" { gt[$2] += $4; pred[$2] += $5; w1[$2] += $6; w2[$2] += $7; w5[$2] += $8;
-                      rel[$2] += $9; if (!($2 in seen)) { seen[$2] = 1; order[n++] = $2 } }
-      END { for (i = 0; i < n; ++i) { t = order[i];
-              printf "| %s | %s | %.4f | %s | %.4f | %.4f | %.4f |\n", x, t, pred[t] / gt[t],
-                     (pred[t] > 0 ? sprintf("%.4f", rel[t] / pred[t]) : "n/a"),
-                     w1[t] / gt[t], w2[t] / gt[t], w5[t] / gt[t] } }'
+    for type in $types; do
+      echo "| $x | $type | $(cat "$out/x$x"/scene_*/eval.tsv | pooled_depth_columns "$type") |"
+    done
   done
   echo
   echo "| x | fused points (mean) | accuracy / diag | completeness / diag | overall / diag | precision | recall | F-score |"
   echo "|---|---|---|---|---|---|---|---|"
   for x in $widenings; do
-    for ws in "$out/x$x"/scene_*; do
-      diagonal=$(grep -o '"bbox_diagonal": *[0-9.eE+-]*' "$ws/eval.json" | head -n 1 | sed 's/.*: *//')
-      [ -n "$diagonal" ] || die "no bbox_diagonal in $ws/eval.json"
-      awk -F'\t' -v d="$diagonal" '$1 == "cloud" { print $3, $5 / d, $6 / d, $7 / d, $8, $9, $10 }' "$ws/eval.tsv"
-    done | awk -v x="$x" '
-      { n += 1; p += $1; a += $2; c += $3; o += $4; pr += ($5 == "nan" ? 0 : $5); r += $6; f += $7 }
-      END { if (n > 0) printf "| %s | %.0f | %.5f | %.5f | %.5f | %.4f | %.4f | %.4f |\n",
-                              x, p / n, a / n, c / n, o / n, pr / n, r / n, f / n }'
+    clouds=$(mean_cloud_columns eval.tsv eval.json "$out/x$x"/scene_*) || die "a scene has no cloud scores"
+    [ -z "$clouds" ] || echo "| $x | $clouds |"
   done
   echo
   echo "(this run: $(( $(date +%s) - start )) s on $(nproc) cores; per-scene numbers in OUT_DIR/x*/scene_*/eval.txt)"

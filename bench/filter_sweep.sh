@@ -20,15 +20,15 @@
 #
 # Each setting leaves its logs and scores in each scene as fuse_<K>.log and
 # eval_<K>.{tsv,json} (K = the setting's position, from 1), and the geometric
-# maps and fused.ply of the last setting. Columns: the geometric maps pooled
-# over all views of all scenes as depth_range_robustness.sh pools them
-# (coverage, AbsRel, fraction of all ground-truth pixels within 2 %); the
-# clouds as means over scenes (points, accuracy and completeness over the
-# ground-truth cloud's bounding-box diagonal, precision / recall / F-score at
-# dispmvs_eval's default tau).
+# maps and fused.ply of the last setting. Columns: those of
+# depth_range_robustness.sh's tables, pooled the same way
+# (bench/eval_pooling.sh): the geometric maps over all views of all scenes,
+# the clouds as means over scenes (F-score at dispmvs_eval's default tau).
 set -euo pipefail
 
 die() { echo "filter_sweep: $*" >&2; exit 1; }
+# shellcheck source=eval_pooling.sh
+source "$(dirname "$0")/eval_pooling.sh"
 
 [ $# -ge 3 ] || die "usage: $0 BUILD_DIR WS_ROOT [--sources N] \"REPROJ DEPTH CONSISTENT CONFIDENCE\"..."
 build=$(cd "$1" && pwd) || die "no build directory $1"
@@ -47,8 +47,8 @@ done
 workspaces=("$root"/scene_*)
 [ -d "${workspaces[0]}" ] || die "no scene_* workspace in $root"
 
-echo "| max_reproj_error | max_depth_error | min_num_consistent | min_confidence | geometric coverage | AbsRel | <2 % | fused points (mean) | accuracy / diag | completeness / diag | precision | recall | F-score |"
-echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+echo "| max_reproj_error | max_depth_error | min_num_consistent | min_confidence | geometric coverage | AbsRel | <1 % | <2 % | <5 % | fused points (mean) | accuracy / diag | completeness / diag | overall / diag | precision | recall | F-score |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
 k=0
 for setting in "$@"; do
   k=$((k + 1))
@@ -63,16 +63,9 @@ for setting in "$@"; do
       --ply "$ws/fused.ply" --json "$ws/eval_$k.json" --tsv "$ws/eval_$k.tsv" > /dev/null ||
       die "dispmvs_eval failed on $ws"
   done
-  maps=$(for ws in "${workspaces[@]}"; do cat "$ws/eval_$k.tsv"; done | awk -F'\t' '
-    $1 == "depth" && $2 == "dispmvs.geometric" { gt += $4; pred += $5; w2 += $7; rel += $9 }
-    END { printf "%.4f | %s | %.4f", pred / gt, (pred > 0 ? sprintf("%.4f", rel / pred) : "n/a"),
-                 w2 / gt }')
-  clouds=$(for ws in "${workspaces[@]}"; do
-    diagonal=$(grep -o '"bbox_diagonal": *[0-9.eE+-]*' "$ws/eval_$k.json" | head -n 1 | sed 's/.*: *//')
-    [ -n "$diagonal" ] || die "no bbox_diagonal in $ws/eval_$k.json"
-    awk -F'\t' -v d="$diagonal" '$1 == "cloud" { print $3, $5 / d, $6 / d, $8, $9, $10 }' "$ws/eval_$k.tsv"
-  done | awk '
-    { n += 1; p += $1; a += $2; c += $3; pr += ($4 == "nan" ? 0 : $4); r += $5; f += $6 }
-    END { printf "%.0f | %.5f | %.5f | %.4f | %.4f | %.4f", p / n, a / n, c / n, pr / n, r / n, f / n }')
+  maps=$(for ws in "${workspaces[@]}"; do cat "$ws/eval_$k.tsv"; done |
+    pooled_depth_columns dispmvs.geometric)
+  clouds=$(mean_cloud_columns "eval_$k.tsv" "eval_$k.json" "${workspaces[@]}") ||
+    die "a scene has no cloud scores"
   echo "| $reproj | $depth | $consistent | $confidence | $maps | $clouds |"
 done

@@ -11,11 +11,16 @@
 namespace dispmvs::colmap_io {
 namespace {
 
+// What a temporary name adds to the final one, before "PID-N";
+// RemoveLeftoverTemporaries finds the temporaries by it.
+constexpr const char* kTemporaryMark = ".tmp-";
+
 // Unique within the process (counter) and across processes (pid), so two
 // writers of the same file never share a temporary name.
 std::filesystem::path TemporaryNameFor(const std::filesystem::path& path) {
   static std::atomic<unsigned long> counter{0};
-  return path.string() + ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter++);
+  return path.string() + kTemporaryMark + std::to_string(::getpid()) + "-" +
+         std::to_string(counter++);
 }
 
 }  // namespace
@@ -59,7 +64,7 @@ void WriteFileAtomically(const std::filesystem::path& path,
 
 int RemoveLeftoverTemporaries(const std::filesystem::path& path) {
   const std::filesystem::path folder = path.has_parent_path() ? path.parent_path() : ".";
-  const std::string prefix = path.filename().string() + ".tmp-";
+  const std::string prefix = path.filename().string() + kTemporaryMark;
   std::error_code ec;
   if (!std::filesystem::is_directory(folder, ec)) return 0;
   std::vector<std::filesystem::path> leftovers;
