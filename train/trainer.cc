@@ -27,6 +27,7 @@
 #include "synth/photo_folder.h"
 #include "synth/rng.h"
 #include "train/batch.h"
+#include "train/source_pixel_metrics.h"
 #include "train/mvsnet_dataset.h"
 
 namespace dispmvs::train {
@@ -458,9 +459,17 @@ std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vec
 }
 
 // Depth metrics on the validation scenes with the hint widened by
-// `widening` (0: no hint), with the network's iterations as they are.
-ValidationDepthMetrics ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
-                                     const TrainOptions& options, double widening) {
+// `widening` (0: no hint), with the network's iterations as they are: over
+// every ground-truth pixel (`all`) and over those some source sees (`seen`),
+// and the network's matches in the sources' pixels (source_pixel_metrics.h).
+struct DepthValidation {
+  ValidationDepthMetrics all, seen;
+  double seen_share = 0;
+  SourcePixelShares source_pixels;
+};
+
+DepthValidation ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                              const TrainOptions& options, double widening) {
   if (widening == 0 && net->config().NeedsDepthRange()) {
     throw std::invalid_argument("weights of config '" + net->config().name +
                                 "' need a depth-range hint: no 'none' row for them");
@@ -468,16 +477,27 @@ ValidationDepthMetrics ValidateDepth(DispMvsNet& net, const std::vector<synth::S
   const bool was_training = net->is_training();
   net->eval();
   torch::NoGradGuard no_grad;
-  ValidationDepthSums sums;
+  ValidationDepthSums sums, seen_sums;
+  SourcePixelCounts source_sums;
   for (size_t i = 0; i < scenes.size(); ++i) {
     const auto batch = MakeBatch({scenes[i]}, widening);
     // Same initialisation for a scene at every evaluation: the numbers differ
     // between evaluations only because the weights do.
     const auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
     sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
+    torch::Tensor seen;
+    source_sums += CountSourcePixels(batch.gt_depths, batch.input.intrinsics,
+                                     batch.input.extrinsics, output.depth, output.valid, &seen);
+    seen_sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, seen);
   }
   net->train(was_training);
-  return FinalizeValidation(sums);
+  DepthValidation result;
+  result.all = FinalizeValidation(sums);
+  result.seen = FinalizeValidation(seen_sums);
+  result.seen_share =
+      sums.gt_pixels > 0 ? static_cast<double>(seen_sums.gt_pixels) / sums.gt_pixels : 0.0;
+  result.source_pixels = SharesOf(source_sums);
+  return result;
 }
 
 // One table row per widening; the coarse accuracy measured once for all.
@@ -487,7 +507,11 @@ std::vector<WideningResult> Validate(DispMvsNet& net, const std::vector<synth::S
   for (double x : widenings) {
     WideningResult row;
     row.widening = x;
-    row.metrics = ValidateDepth(net, scenes, options, x);
+    const DepthValidation depth = ValidateDepth(net, scenes, options, x);
+    row.metrics = depth.all;
+    row.seen = depth.seen;
+    row.seen_share = depth.seen_share;
+    row.source_pixels = depth.source_pixels;
     results.push_back(row);
   }
   const auto [top1, counted] = CoarseMatchingAccuracy(net, scenes);
@@ -619,6 +643,13 @@ std::string FormatMetrics(const ValidationDepthMetrics& m) {
                 m.within_1, m.within_2, m.within_5, m.abs_rel, m.coverage);
   return buffer;
 }
+
+std::string FormatSeenMetrics(const WideningResult& r) {
+  char share[64];
+  std::snprintf(share, sizeof share, "seen by a source (%.4f of the pixels): ", r.seen_share);
+  return share + FormatMetrics(r.seen);
+}
+
 
 namespace {
 

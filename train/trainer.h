@@ -24,6 +24,7 @@
 
 #include <torch/torch.h>
 
+#include "train/source_pixel_metrics.h"
 #include "train/validation_metrics.h"
 
 namespace dispmvs::train {
@@ -142,6 +143,15 @@ void Train(const TrainOptions& options, std::ostream& log);
 struct WideningResult {
   double widening = 1;  // x: depth range hint (d_min / x, d_max * x); 0 = no hint
   ValidationDepthMetrics metrics;
+  // The same metrics over the ground-truth pixels that at least one source
+  // sees (in its frame and not occluded there: model::ComputeGroundTruthMatches
+  // at full resolution), and their share of the ground-truth pixels. Matching
+  // can only reach these; the others the network has to guess. So `seen`
+  // says how well the network matches, and the gap to `metrics` how much of
+  // the error no matcher could avoid.
+  ValidationDepthMetrics seen;
+  double seen_share = 0;
+  SourcePixelShares source_pixels;
   // Coarse matching: share of ground-truth matches whose arg-max along the
   // segment volume is within one 1/16 pixel (pairs counted: matching_count).
   double coarse_top1 = 0;
@@ -158,6 +168,8 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path,
 
 // One line per result: "x=2  <1%: 0.123  <2%: ...  AbsRel: ...  coverage: ...".
 std::string FormatMetrics(const ValidationDepthMetrics& metrics);
+// "seen by a source (0.8123 of the pixels): <1%: ..." for WideningResult::seen.
+std::string FormatSeenMetrics(const WideningResult& result);
 // "coarse top-1: 0.4321".
 std::string FormatMatching(const WideningResult& result);
 

@@ -137,6 +137,20 @@ TEST(TrainerTest, EvaluateWeightsGivesOneRowPerWidening) {
   EXPECT_EQ(rows[0].metrics.gt_pixels, rows[1].metrics.gt_pixels);
   EXPECT_GT(rows[0].metrics.gt_pixels, 0);
   EXPECT_GE(rows[0].metrics.coverage, rows[0].metrics.within_5);
+  // The pixels some source sees are a subset of the ground-truth pixels: the
+  // share counts them, and no more of them lie within 2 % than of all.
+  for (const auto& row : rows) {
+    EXPECT_GT(row.seen_share, 0.0);
+    EXPECT_LE(row.seen_share, 1.0);
+    EXPECT_EQ(row.seen.gt_pixels,
+              std::llround(row.seen_share * static_cast<double>(row.metrics.gt_pixels)));
+    EXPECT_LE(row.seen.within_2 * static_cast<double>(row.seen.gt_pixels),
+              row.metrics.within_2 * static_cast<double>(row.metrics.gt_pixels) + 0.5);
+    EXPECT_LE(row.source_pixels.within_1px, row.source_pixels.within_2px);
+    EXPECT_LE(row.source_pixels.within_2px, 1.0);
+    EXPECT_LE(row.source_pixels.moves_1px, row.source_pixels.moves_half_px);
+    EXPECT_GT(row.source_pixels.moves_half_px, 0.0);  // generated scenes have parallax
+  }
 
   // Fewer GRU iterations change the result: the override reaches the network.
   options.eval_coarse_iterations = 1;
