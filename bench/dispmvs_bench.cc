@@ -392,12 +392,10 @@ struct Row {
   Measurement m;
 };
 
+// The named configuration as dispmvs_train builds it (small_v2: 4 coarse
+// iterations, as its shipped weights run), with the iteration overrides.
 ModelConfig MakeConfig(const std::string& name, const Options& o) {
-  ModelConfig config = name.rfind("paper", 0) == 0 ? ModelConfig::Paper() : ModelConfig::Small();
-  if (name.size() > 3 && name.compare(name.size() - 3, 3, "_v2") == 0) {
-    config.init = ModelConfig::Init::kMatch;  // model v2: segment volume, match start
-    config.name = name;
-  }
+  ModelConfig config = ModelConfig::ByName(name);
   if (o.coarse_iterations > 0) config.coarse_iterations = o.coarse_iterations;
   if (o.fine_iterations > 0) config.fine_iterations = o.fine_iterations;
   return config;

@@ -153,6 +153,22 @@ ModelConfig ModelConfig::SmallV2() {
   return c;
 }
 
+ModelConfig ModelConfig::PaperV2() {
+  ModelConfig c = Paper();
+  c.name = "paper_v2";
+  c.init = Init::kMatch;
+  return c;
+}
+
+ModelConfig ModelConfig::ByName(const std::string& name) {
+  if (name == "paper") return Paper();
+  if (name == "small") return Small();
+  if (name == "paper_v2") return PaperV2();
+  if (name == "small_v2") return SmallV2();
+  throw std::invalid_argument("config must be 'paper', 'small', 'paper_v2' or 'small_v2', got '" +
+                              name + "'");
+}
+
 const char* InitName(ModelConfig::Init init) {
   return init == ModelConfig::Init::kMatch ? "match" : "random";
 }

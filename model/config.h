@@ -63,6 +63,12 @@ struct ModelConfig {
   // not from a random depth, and 4 iterations measured better than the
   // paper's 8 (models/README.md, "GRU iterations").
   static ModelConfig SmallV2();
+  // Paper() with init = kMatch: model v2 at the paper's widths.
+  static ModelConfig PaperV2();
+  // The configuration named "paper", "small", "paper_v2" or "small_v2" (the
+  // names dispmvs_train --config and dispmvs_bench --config take); throws
+  // std::invalid_argument for any other.
+  static ModelConfig ByName(const std::string& name);
 
   std::map<std::string, std::string> ToMetadata() const;
   // Throws std::invalid_argument on a missing or malformed key.

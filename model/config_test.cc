@@ -71,6 +71,24 @@ TEST(ModelConfigTest, SmallV2StartsFromTheMatchWithFourCoarseIterations) {
   EXPECT_EQ(same.ToMetadata(), small.ToMetadata());
 }
 
+TEST(ModelConfigTest, ByNameGivesTheNamedConfigurations) {
+  // Every name gives the factory's configuration, field for field (the
+  // benchmark once built small_v2 by hand and ran 8 coarse iterations).
+  EXPECT_EQ(ModelConfig::ByName("paper").ToMetadata(), ModelConfig::Paper().ToMetadata());
+  EXPECT_EQ(ModelConfig::ByName("small").ToMetadata(), ModelConfig::Small().ToMetadata());
+  EXPECT_EQ(ModelConfig::ByName("small_v2").ToMetadata(), ModelConfig::SmallV2().ToMetadata());
+  EXPECT_EQ(ModelConfig::ByName("small_v2").coarse_iterations, 4);
+  const ModelConfig paper_v2 = ModelConfig::ByName("paper_v2");
+  EXPECT_EQ(paper_v2.name, "paper_v2");
+  EXPECT_EQ(paper_v2.init, ModelConfig::Init::kMatch);
+  ModelConfig as_paper = paper_v2;
+  as_paper.name = "paper";
+  as_paper.init = ModelConfig::Init::kRandom;
+  EXPECT_EQ(as_paper.ToMetadata(), ModelConfig::Paper().ToMetadata());
+  ExpectInvalid([] { ModelConfig::ByName("Small"); }, "got 'Small'");
+  ExpectInvalid([] { ModelConfig::ByName(""); }, "small_v2");
+}
+
 TEST(ModelConfigTest, CheckNamesTheBadField) {
   ModelConfig c;
   c.match_fine_channels = 0;

@@ -55,20 +55,6 @@ torch::Generator CpuGenerator(uint64_t seed) {
   return at::make_generator<at::CPUGeneratorImpl>(seed);
 }
 
-ModelConfig ModelConfigByName(const std::string& name) {
-  if (name == "paper") return ModelConfig::Paper();
-  if (name == "small") return ModelConfig::Small();
-  if (name == "small_v2") return ModelConfig::SmallV2();
-  if (name == "paper_v2") {
-    ModelConfig config = ModelConfig::Paper();
-    config.name = "paper_v2";
-    config.init = ModelConfig::Init::kMatch;
-    return config;
-  }
-  throw std::invalid_argument("config must be 'paper', 'small', 'paper_v2' or 'small_v2', got '" +
-                              name + "'");
-}
-
 // Process CPU time (all threads), seconds.
 double CpuSeconds() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
 
@@ -528,7 +514,7 @@ std::vector<WideningResult> Validate(DispMvsNet& net, const std::vector<synth::S
 
 void TrainOptions::Check(bool for_training) const {
   auto fail = [](const std::string& what) { throw std::invalid_argument(what); };
-  ModelConfigByName(config);
+  ModelConfig::ByName(config);
   if (height < 1 || height > 8192) fail("height must be in [1, 8192], got " + std::to_string(height));
   if (width < 1 || width > 8192) fail("width must be in [1, 8192], got " + std::to_string(width));
   if (num_sources < 1 || num_sources > 64) {
@@ -576,7 +562,7 @@ void TrainOptions::Check(bool for_training) const {
   if (matching_warmup_steps < 0) {
     fail("matching_warmup_steps must be >= 0, got " + std::to_string(matching_warmup_steps));
   }
-  if (matching_warmup_steps > 0 && (matching_loss_weight == 0 || ModelConfigByName(config).NeedsDepthRange())) {
+  if (matching_warmup_steps > 0 && (matching_loss_weight == 0 || ModelConfig::ByName(config).NeedsDepthRange())) {
     fail("matching_warmup_steps needs a v2 config and matching_loss_weight > 0");
   }
   if (!(difficulty_start >= 0 && difficulty_start <= 1)) {
@@ -814,7 +800,7 @@ void Train(const TrainOptions& options, std::ostream& console) {
   fs::create_directories(dir);
   Logger log(console, dir / "train.log");
 
-  const ModelConfig config = ModelConfigByName(options.config);
+  const ModelConfig config = ModelConfig::ByName(options.config);
   torch::manual_seed(options.seed);  // the initial weights
   DispMvsNet net(config);
   net->to(device);
