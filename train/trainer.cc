@@ -444,18 +444,13 @@ std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vec
   return {counted > 0 ? hits / counted : 0.0, counted};
 }
 
-// Depth metrics on the validation scenes with the hint widened by
-// `widening` (0: no hint), with the network's iterations as they are: over
-// every ground-truth pixel (`all`) and over those some source sees (`seen`),
-// and the network's matches in the sources' pixels (source_pixel_metrics.h).
-struct DepthValidation {
-  ValidationDepthMetrics all, seen;
-  double seen_share = 0;
-  SourcePixelShares source_pixels;
-};
-
-DepthValidation ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
-                              const TrainOptions& options, double widening) {
+// The depth metrics of a WideningResult on the validation scenes with the
+// hint widened by `widening` (0: no hint), with the network's iterations as
+// they are. With `look_from_sources` (the evaluation table; training's
+// validations log only the first line) also `seen`, `seen_share` and
+// `source_pixels` (source_pixel_metrics.h).
+WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                             const TrainOptions& options, double widening, bool look_from_sources) {
   if (widening == 0 && net->config().NeedsDepthRange()) {
     throw std::invalid_argument("weights of config '" + net->config().name +
                                 "' need a depth-range hint: no 'none' row for them");
@@ -471,14 +466,16 @@ DepthValidation ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSam
     // between evaluations only because the weights do.
     const auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
     sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
+    if (!look_from_sources) continue;
     torch::Tensor seen;
     source_sums += CountSourcePixels(batch.gt_depths, batch.input.intrinsics,
                                      batch.input.extrinsics, output.depth, output.valid, &seen);
     seen_sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, seen);
   }
   net->train(was_training);
-  DepthValidation result;
-  result.all = FinalizeValidation(sums);
+  WideningResult result;
+  result.widening = widening;
+  result.metrics = FinalizeValidation(sums);
   result.seen = FinalizeValidation(seen_sums);
   result.seen_share =
       sums.gt_pixels > 0 ? static_cast<double>(seen_sums.gt_pixels) / sums.gt_pixels : 0.0;
@@ -488,17 +485,11 @@ DepthValidation ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSam
 
 // One table row per widening; the coarse accuracy measured once for all.
 std::vector<WideningResult> Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
-                                     const TrainOptions& options, const std::vector<double>& widenings) {
+                                     const TrainOptions& options, const std::vector<double>& widenings,
+                                     bool look_from_sources) {
   std::vector<WideningResult> results;
   for (double x : widenings) {
-    WideningResult row;
-    row.widening = x;
-    const DepthValidation depth = ValidateDepth(net, scenes, options, x);
-    row.metrics = depth.all;
-    row.seen = depth.seen;
-    row.seen_share = depth.seen_share;
-    row.source_pixels = depth.source_pixels;
-    results.push_back(row);
+    results.push_back(ValidateDepth(net, scenes, options, x, look_from_sources));
   }
   const auto [top1, counted] = CoarseMatchingAccuracy(net, scenes);
   for (auto& row : results) {
@@ -635,7 +626,6 @@ std::string FormatSeenMetrics(const WideningResult& r) {
   std::snprintf(share, sizeof share, "seen by a source (%.4f of the pixels): ", r.seen_share);
   return share + FormatMetrics(r.seen);
 }
-
 
 namespace {
 
@@ -780,7 +770,7 @@ void ValidateAndLog(DispMvsNet& net, const ModelConfig& config, const std::vecto
                     const TrainOptions& options, int64_t step, double cpu_start, Logger& log) {
   if (scenes.empty()) return;
   net->set_iterations(config.coarse_iterations, config.fine_iterations);
-  const WideningResult result = Validate(net, scenes, options, {1.0}).front();
+  const WideningResult result = Validate(net, scenes, options, {1.0}, /*look_from_sources=*/false).front();
   if (options.train_coarse_iterations > 0) {
     net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
   }
@@ -888,7 +878,7 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
       options.eval_fine_iterations > 0 ? options.eval_fine_iterations : config.fine_iterations);
   net->to(device);
   const auto scenes = ValidationScenes(options, device);
-  return Validate(net, scenes, options, widenings);
+  return Validate(net, scenes, options, widenings, /*look_from_sources=*/true);
 }
 
 }  // namespace dispmvs::train
