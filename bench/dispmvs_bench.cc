@@ -2,12 +2,12 @@
 // (inference, no gradients), with the share of time per network stage.
 //
 //   dispmvs_bench [--sizes 640x512,1600x1152] [--sources 5] [--config small,paper]
-//                 [--coarse_iterations N] [--fine_iterations N] [--device cpu|cuda[:i]]
+//                 [--precision fp32,bf16] [--coarse_iterations N] [--fine_iterations N] [--device cpu|cuda[:i]]
 //                 [--threads 1,2] [--warmup 1] [--reps 3]
 //
 // Random weights and images: the cost of a pass does not depend on their
 // values (the network has no data-dependent control flow). For every
-// configuration, size and thread count it runs --warmup passes, then --reps
+// configuration, precision, size and thread count it runs --warmup passes, then --reps
 // plain passes (their median and minimum are the time per view), then --reps
 // passes with the stage timer attached (model/stage_timer.h) for the
 // breakdown. On CUDA the timed passes synchronise at every stage boundary, so
@@ -19,7 +19,9 @@
 // forked child whose allocations of 128 KiB and more get their own mappings
 // (MapLargeAllocations), so that freed buffers leave the resident set and the
 // peak follows the live tensors rather than the allocator's history. On CUDA,
-// the caching allocator's peak of allocated bytes during a pass.
+// the caching allocator's peak of allocated bytes during a pass. The timings
+// then run with the allocator as the programs set it
+// (model/host_allocator.h: freed memory kept for reuse).
 
 #include <algorithm>
 #include <chrono>
@@ -49,6 +51,8 @@
 #include "model/device.h"
 #include "src/program_main.h"
 #include "model/dispmvs_net.h"
+#include "model/host_allocator.h"
+#include "model/precision.h"
 #include "model/stage_timer.h"
 
 namespace {
@@ -59,6 +63,7 @@ using dispmvs::model::kNumNetStages;
 using dispmvs::model::ModelConfig;
 using dispmvs::model::NetStage;
 using dispmvs::model::NetStageName;
+using dispmvs::model::Precision;
 using dispmvs::model::StageTimer;
 
 struct ImageSize {
@@ -70,6 +75,7 @@ struct Options {
   std::vector<ImageSize> sizes{{640, 512}};
   int64_t sources = 5;
   std::vector<std::string> configs{"small"};
+  std::vector<std::string> precisions{"fp32"};  // auto, fp32, bf16 (model/precision.h)
   int64_t coarse_iterations = 0;  // 0: the configuration's own
   int64_t fine_iterations = 0;
   std::string device = "cpu";
@@ -86,6 +92,8 @@ constexpr const char* kUsage =
     "  --sources N              source views per reference (default 5)\n"
     "  --config small,paper     network configurations: paper, small (random start) and/or\n"
     "                           paper_v2, small_v2 (model v2: segment volume, match start) (small)\n"
+    "  --precision P[,P...]     arithmetic of the GRU update's convolutions: fp32, bf16, or auto\n"
+    "                           (bf16 on a CPU with native bf16, else fp32) (default fp32)\n"
     "  --coarse_iterations N    override the configuration's GRU iterations (0: keep)\n"
     "  --fine_iterations N      same for the fine stage\n"
     "  --device cpu|cuda|cuda:<index> (default cpu)\n"
@@ -151,6 +159,10 @@ Options ParseArgs(int argc, char** argv) {
           throw std::invalid_argument("--config takes paper, small, paper_v2 and/or small_v2, got '" + c + "'");
         }
       }
+    } else if (flag == "--precision") {
+      o.precisions = SplitComma(value);
+      // The text only; what "auto" means is resolved for the device later.
+      for (const auto& p : o.precisions) dispmvs::model::ResolvePrecision(p, torch::kCPU, flag);
     } else if (flag == "--coarse_iterations") {
       o.coarse_iterations = ParseInteger(flag, value, 0, 1000);
     } else if (flag == "--fine_iterations") {
@@ -168,8 +180,9 @@ Options ParseArgs(int argc, char** argv) {
       throw std::invalid_argument("unknown option " + flag + " (see --help)");
     }
   }
-  if (o.sizes.empty() || o.threads.empty() || o.configs.empty()) {
-    throw std::invalid_argument("--sizes, --threads and --config need at least one value");
+  if (o.sizes.empty() || o.threads.empty() || o.configs.empty() || o.precisions.empty()) {
+    throw std::invalid_argument(
+        "--sizes, --threads, --config and --precision need at least one value");
   }
   return o;
 }
@@ -385,6 +398,7 @@ std::vector<int64_t> MeasureCpuMemoryInChild(Fn measure) {
 
 struct Row {
   std::string config;
+  std::string precision;  // as resolved for the device
   int64_t params = 0;
   int64_t coarse_iterations = 0, fine_iterations = 0;
   ImageSize size;
@@ -419,18 +433,28 @@ int main(int argc, char** argv) {
     if (device.is_cuda()) thread_counts.resize(1);  // they do not matter there
 
     // A row per configuration x size x thread count, in this order.
+    std::vector<Precision> precisions;
+    for (const std::string& text : o.precisions) {
+      precisions.push_back(dispmvs::model::ResolvePrecision(text, device, "--precision"));
+    }
+
+    // A row per configuration x precision x size x thread count, in this
+    // order.
     std::vector<Row> rows;
     for (const std::string& name : o.configs) {
       const ModelConfig config = MakeConfig(name, o);
-      for (const ImageSize& size : o.sizes) {
-        for (const int64_t threads : thread_counts) {
-          Row r;
-          r.config = name;
-          r.coarse_iterations = config.coarse_iterations;
-          r.fine_iterations = config.fine_iterations;
-          r.size = size;
-          r.threads = threads;
-          rows.push_back(r);
+      for (const Precision precision : precisions) {
+        for (const ImageSize& size : o.sizes) {
+          for (const int64_t threads : thread_counts) {
+            Row r;
+            r.config = name;
+            r.precision = dispmvs::model::PrecisionName(precision);
+            r.coarse_iterations = config.coarse_iterations;
+            r.fine_iterations = config.fine_iterations;
+            r.size = size;
+            r.threads = threads;
+            rows.push_back(r);
+          }
         }
       }
     }
@@ -442,16 +466,20 @@ int main(int argc, char** argv) {
         DispMvsNet net(MakeConfig(name, o));
         net->eval();
         net->to(device);
-        for (const ImageSize& size : o.sizes) {
-          const DispMvsInput input = MakeInput(size, o.sources, device);
-          for (const int64_t threads : thread_counts) {
-            Row& row = rows.at(index++);
-            torch::set_num_threads(static_cast<int>(threads));
-            std::fprintf(stderr, "dispmvs_bench: %s %s, %lldx%lld, %lld threads\n", what,
-                         name.c_str(), static_cast<long long>(size.width),
-                         static_cast<long long>(size.height), static_cast<long long>(threads));
-            row.params = CountParameters(net);
-            measure(net, input, row);
+        for (const Precision precision : precisions) {
+          net->set_precision(precision);
+          for (const ImageSize& size : o.sizes) {
+            const DispMvsInput input = MakeInput(size, o.sources, device);
+            for (const int64_t threads : thread_counts) {
+              Row& row = rows.at(index++);
+              torch::set_num_threads(static_cast<int>(threads));
+              std::fprintf(stderr, "dispmvs_bench: %s %s %s, %lldx%lld, %lld threads\n", what,
+                           name.c_str(), dispmvs::model::PrecisionName(precision),
+                           static_cast<long long>(size.width), static_cast<long long>(size.height),
+                           static_cast<long long>(threads));
+              row.params = CountParameters(net);
+              measure(net, input, row);
+            }
           }
         }
       }
@@ -476,6 +504,9 @@ int main(int argc, char** argv) {
     } else {
       for_each_row("memory of", measure_memory);
     }
+    // Timings with the allocator as the programs set it (after the memory
+    // child, which maps its large buffers separately instead).
+    if (device.is_cpu()) dispmvs::model::KeepFreedTensorMemory();
     for_each_row("timing", [&](DispMvsNet& net, const DispMvsInput& input, Row& row) {
       const int64_t peak = row.m.peak_bytes;
       row.m = MeasureTime(net, input, o, device);
@@ -488,16 +519,16 @@ int main(int argc, char** argv) {
                 static_cast<long long>(o.warmup), static_cast<long long>(o.reps),
                 static_cast<long long>(o.reps), TORCH_VERSION);
     std::printf("peak memory: %s\n\n", PeakMemoryProbe(device).method());
-    std::printf("| config | params | iters | size | threads | median s | min s | peak MiB |");
+    std::printf("| config | precision | params | iters | size | threads | median s | min s | peak MiB |");
     for (size_t s = 0; s < kNumNetStages; ++s) {
       std::printf(" %s |", NetStageName(static_cast<NetStage>(s)));
     }
-    std::printf(" other |\n|---|---|---|---|---|---|---|---|");
+    std::printf(" other |\n|---|---|---|---|---|---|---|---|---|");
     for (size_t s = 0; s <= kNumNetStages; ++s) std::printf("---|");
     std::printf("\n");
     for (const Row& r : rows) {
-      std::printf("| %s | %.2fM | %lld+%lld | %lldx%lld | %lld | %.3f | %.3f | ", r.config.c_str(),
-                  static_cast<double>(r.params) / 1e6, static_cast<long long>(r.coarse_iterations),
+      std::printf("| %s | %s | %.2fM | %lld+%lld | %lldx%lld | %lld | %.3f | %.3f | ",
+                  r.config.c_str(), r.precision.c_str(), static_cast<double>(r.params) / 1e6, static_cast<long long>(r.coarse_iterations),
                   static_cast<long long>(r.fine_iterations), static_cast<long long>(r.size.width),
                   static_cast<long long>(r.size.height), static_cast<long long>(r.threads),
                   Median(r.m.seconds), *std::min_element(r.m.seconds.begin(), r.m.seconds.end()));

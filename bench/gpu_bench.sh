@@ -4,7 +4,9 @@
 # LibTorch (cmake/build_torch_only.sh; skipped when the build folder is
 # already built, e.g. by train/gpu_train.sh --build_only) and runs
 # dispmvs_bench --device cuda at 640x512 and 1600x1152, N = 5, for model v2
-# and the paper's design in both sizes. Leaves gpu_bench.md (the command, the
+# and the paper's design in both sizes, with the GRU update in fp32 and in
+# bf16 (--precision; dispmvs_colmap's auto keeps fp32 on CUDA until this
+# table says otherwise). Leaves gpu_bench.md (the command, the
 # GPU's name and the table for docs/benchmarks.md) in --out ($OUT, else
 # out/gpu_bench).
 #
@@ -14,13 +16,14 @@
 set -euo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
-device=cuda sizes=640x512,1600x1152 configs=small_v2,small,paper_v2,paper sources=5 reps=5 warmup=2
+device=cuda sizes=640x512,1600x1152 configs=small_v2,small,paper_v2,paper precisions=fp32,bf16 sources=5 reps=5 warmup=2
 build="$root/build-gpu" out=${OUT:-$root/out/gpu_bench} work=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --device) device=$2; shift 2 ;;
     --sizes) sizes=$2; shift 2 ;;
     --config) configs=$2; shift 2 ;;
+    --precision) precisions=$2; shift 2 ;;
     --sources) sources=$2; shift 2 ;;
     --reps) reps=$2; shift 2 ;;
     --warmup) warmup=$2; shift 2 ;;
@@ -28,7 +31,7 @@ while [ $# -gt 0 ]; do
     --out) out=$2; shift 2 ;;
     --work) work=$2; shift 2 ;;
     -h|--help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'
-      echo "Options: --device D (cuda) --sizes WxH,... ($sizes) --config LIST ($configs)"
+      echo "Options: --device D (cuda) --sizes WxH,... ($sizes) --config LIST ($configs) --precision LIST ($precisions)"
       echo "         --sources N (5) --reps N (5) --warmup N (2) --build DIR (build-gpu) --out DIR --work DIR"
       exit 0 ;;
     *) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
@@ -39,7 +42,7 @@ mkdir -p "$out" "$work"
 source "$root/cmake/build_torch_only.sh"
 build_torch_only "$root" "$build" "$work" 0 dispmvs_bench
 bench="$build/bench/dispmvs_bench"
-command=("$bench" --device "$device" --sizes "$sizes" --config "$configs" --sources "$sources"
+command=("$bench" --device "$device" --sizes "$sizes" --config "$configs" --precision "$precisions" --sources "$sources"
          --reps "$reps" --warmup "$warmup")
 echo "running: ${command[*]}"
 "${command[@]}" > "$work/table.txt" 2> "$work/bench.err" || { cat "$work/bench.err" "$work/table.txt"; exit 1; }

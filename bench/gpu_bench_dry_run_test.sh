@@ -11,10 +11,13 @@ fail() { echo "FAIL: $*" >&2; exit 1; }
 cat "$work/run.out"
 md=$work/out/gpu_bench.md
 [ -s "$md" ] || fail "no gpu_bench.md"
-# One table row per configuration and size.
+# One table row per configuration, precision and size.
 for config in small_v2 small paper_v2 paper; do
-  for size in 64x48 96x64; do
-    grep -q "^| $config | [0-9.]*M | [0-9]*+[0-9]* | $size | " "$md" || fail "no row for $config at $size"
+  for precision in fp32 bf16; do
+    for size in 64x48 96x64; do
+      grep -q "^| $config | $precision | [0-9.]*M | [0-9]*+[0-9]* | $size | " "$md" ||
+        fail "no row for $config in $precision at $size"
+    done
   done
 done
 echo "PASS"

@@ -14,6 +14,8 @@
 //                        (what the network did before UpdateInChunks).
 //  * BM_BlockInChunks:   UpdateInChunks with the driver's budget of 2^16
 //                        pixels per call (fine: 3 + 2 pairs; coarse: one call).
+//  * BM_BlockInChunksBf16: the same with the block's convolutions in bf16
+//                        (--precision bf16; needs native bf16 to be fast).
 //  * BM_BlockChannelsLast: weights and inputs in channels-last layout, which
 //                        lets oneDNN skip its layout conversions; slower
 //                        with LibTorch 1.13 on this CPU (docs/benchmarks.md).
@@ -29,6 +31,8 @@
 #include <torch/torch.h>
 
 #include "model/config.h"
+#include "model/host_allocator.h"
+#include "model/precision.h"
 #include "model/update_block.h"
 
 namespace {
@@ -47,6 +51,7 @@ struct Problem {
 Problem MakeProblem(const benchmark::State& state) {
   const bool fine = state.range(0) == 1;
   torch::set_num_threads(static_cast<int>(state.range(1)));
+  dispmvs::model::KeepFreedTensorMemory();  // as the programs run the block
   const ModelConfig config = ModelConfig::SmallV2();
   const int64_t hidden = fine ? config.hidden_fine : config.hidden_coarse;
   const int64_t context = fine ? config.context_input_fine : config.context_input_coarse;
@@ -80,9 +85,8 @@ void BM_Block(benchmark::State& state) {
   Label(state);
 }
 
-void BM_BlockInChunks(benchmark::State& state) {
-  torch::NoGradGuard no_grad;
-  Problem p = MakeProblem(state);
+// The timing loop of the UpdateInChunks variants.
+void TimeInChunks(benchmark::State& state, Problem& p) {
   for (auto _ : state) {
     const UpdateBlockOutput out = dispmvs::model::UpdateInChunks(
         p.block, p.hidden, p.context_terms, p.cost, p.eflow,
@@ -90,6 +94,27 @@ void BM_BlockInChunks(benchmark::State& state) {
     benchmark::DoNotOptimize(out.hidden.data_ptr());
   }
   Label(state);
+}
+
+void BM_BlockInChunks(benchmark::State& state) {
+  torch::NoGradGuard no_grad;
+  Problem p = MakeProblem(state);
+  TimeInChunks(state, p);
+}
+
+// What inference runs with --precision bf16: UpdateInChunks with every
+// convolution of the block in bf16 (model/precision.h), the state in fp32.
+// Needs native bf16 (CpuHasNativeBf16) to be fast; skipped without it.
+void BM_BlockInChunksBf16(benchmark::State& state) {
+  if (!dispmvs::model::CpuHasNativeBf16()) {
+    state.SkipWithError("this CPU has no native bf16 (AVX-512 BF16 or AMX)");
+    return;
+  }
+  torch::NoGradGuard no_grad;
+  Problem p = MakeProblem(state);
+  p.block->set_precision(dispmvs::model::Precision::kBFloat16);
+  p.context_terms = p.block->ContextTerms(p.context);
+  TimeInChunks(state, p);
 }
 
 void BM_BlockChannelsLast(benchmark::State& state) {
@@ -126,6 +151,7 @@ void Shapes(benchmark::internal::Benchmark* b) {
 
 BENCHMARK(BM_Block)->Apply(Shapes);
 BENCHMARK(BM_BlockInChunks)->Apply(Shapes);
+BENCHMARK(BM_BlockInChunksBf16)->Apply(Shapes);
 BENCHMARK(BM_BlockChannelsLast)->Apply(Shapes);
 BENCHMARK(BM_ContextTerms)->Apply(Shapes);
 

@@ -11,6 +11,7 @@
 #include "dense/feature_cache.h"
 #include "model/device.h"
 #include "model/dispmvs_net.h"
+#include "model/host_allocator.h"
 #include "model/safetensors.h"
 
 namespace dispmvs::dense {
@@ -65,7 +66,7 @@ colmap_io::DenseArray ToDenseArray(const torch::Tensor& map) {
 
 void EstimatorOptions::Check() const {
   if (model_path.empty()) throw std::invalid_argument("--model_path must not be empty");
-  model::ParseUsableDevice(device, "--device");
+  model::ResolvePrecision(precision, model::ParseUsableDevice(device, "--device"), "--precision");
   if (threads < 0) throw std::invalid_argument("--threads must be >= 0 (0 = one per core)");
   if (coarse_iterations < 0 || fine_iterations < 0) {
     throw std::invalid_argument("--coarse_iterations and --fine_iterations must be >= 0");
@@ -75,6 +76,7 @@ void EstimatorOptions::Check() const {
 
 struct DepthEstimator::Impl {
   torch::Device device{torch::kCPU};
+  model::Precision precision = model::Precision::kFloat32;
   model::ModelConfig config;
   model::DispMvsNet net{nullptr};
   std::unique_ptr<FeatureCache> features;
@@ -83,6 +85,8 @@ struct DepthEstimator::Impl {
 DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::make_unique<Impl>()) {
   options.Check();
   impl_->device = model::ParseUsableDevice(options.device, "--device");
+  impl_->precision = model::ResolvePrecision(options.precision, impl_->device, "--precision");
+  if (impl_->device.is_cpu()) model::KeepFreedTensorMemory();
   impl_->features =
       std::make_unique<FeatureCache>(static_cast<std::size_t>(options.feature_cache_mb) << 20);
   const int threads = options.threads > 0
@@ -102,6 +106,7 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   }
   impl_->net->to(impl_->device);
   impl_->net->eval();
+  impl_->net->set_precision(impl_->precision);
 }
 
 DepthEstimator::~DepthEstimator() = default;
@@ -125,7 +130,8 @@ std::string DepthEstimator::Describe() const {
   for (const auto& p : impl_->net->parameters()) parameters += p.numel();
   return impl_->config.name + ", " + std::to_string(parameters) + " parameters, " +
          std::to_string(impl_->config.coarse_iterations) + "+" +
-         std::to_string(impl_->config.fine_iterations) + " iterations, " + impl_->device.str();
+         std::to_string(impl_->config.fine_iterations) + " iterations, " + impl_->device.str() +
+         ", " + model::PrecisionName(impl_->precision);
 }
 
 DepthEstimator::EncoderUse DepthEstimator::encoder_use() const {

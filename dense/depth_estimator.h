@@ -26,6 +26,11 @@ struct EstimatorOptions {
   // GRU iterations per stage; 0 = those the weights were trained with.
   int coarse_iterations = 0;
   int fine_iterations = 0;
+  // Arithmetic of the GRU update's convolutions: "auto" (bf16 on a CPU with
+  // native bf16 instructions, fp32 elsewhere), "fp32" or "bf16"
+  // (model/precision.h; the 20-scene table is the same in both,
+  // docs/benchmarks.md).
+  std::string precision = "auto";
   // Budget for the matching encoder's features kept across problems (an
   // image that is the source of several references is encoded once), MiB;
   // 0 = encode every view of every problem.

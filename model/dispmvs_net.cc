@@ -670,6 +670,12 @@ void DispMvsNetImpl::set_iterations(int64_t coarse, int64_t fine) {
   config_.fine_iterations = fine;
 }
 
+void DispMvsNetImpl::set_precision(Precision precision) {
+  precision_ = precision;
+  coarse_block_->set_precision(precision);
+  fine_block_->set_precision(precision);
+}
+
 StageMatching DispMvsNetImpl::CoarseMatching(const DispMvsInput& input) {
   CheckInput(input, /*needs_depth_range=*/false);
   const torch::TensorOptions opts = input.images.options();

@@ -32,6 +32,7 @@
 #include "model/config.h"
 #include "model/encoder.h"
 #include "model/matching_loss.h"
+#include "model/precision.h"
 #include "model/stage_timer.h"
 #include "model/update_block.h"
 
@@ -130,6 +131,13 @@ class DispMvsNetImpl : public torch::nn::Module {
   // inference. Throws std::invalid_argument unless both are >= 1.
   void set_iterations(int64_t coarse, int64_t fine);
 
+  // The arithmetic of the GRU update blocks' convolutions in later passes
+  // (precision.h; fp32 by default): bf16 is twice as fast on a CPU with
+  // native bf16 (docs/benchmarks.md). The encoders, the correlation and the
+  // geometry stay fp32. For inference: training keeps fp32.
+  void set_precision(Precision precision);
+  Precision precision() const { return precision_; }
+
   // Times the stages of every later forward pass into `timer` (not owned;
   // null detaches). For benchmarks: see stage_timer.h.
   void set_stage_timer(StageTimer* timer) { stage_timer_ = timer; }
@@ -141,6 +149,7 @@ class DispMvsNetImpl : public torch::nn::Module {
   UpdateBlock coarse_block_{nullptr};
   UpdateBlock fine_block_{nullptr};
   StageTimer* stage_timer_ = nullptr;
+  Precision precision_ = Precision::kFloat32;
 };
 TORCH_MODULE(DispMvsNet);
 

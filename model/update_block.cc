@@ -70,7 +70,7 @@ torch::Tensor SepConvGruImpl::ContextTerms(const torch::Tensor& context) {
     }
     const torch::Tensor weight = torch::cat(weights, 0);
     passes.push_back(
-        torch::conv2d(context, weight, torch::cat(biases, 0), /*stride=*/1, SamePadding(weight)));
+        Conv2dIn(precision_, context, weight, torch::cat(biases, 0), SamePadding(weight)));
   }
   return torch::cat(passes, 1);
 }
@@ -103,13 +103,13 @@ torch::Tensor SepConvGruImpl::Step(const torch::Tensor& hidden, const torch::Ten
   const torch::Tensor zr_weight =
       torch::cat({PairColumns(convz, columns), PairColumns(convr, columns)}, 0);
   const torch::Tensor zr = torch::sigmoid(AddPerReference(
-      torch::conv2d(torch::cat({hidden, motion}, 1), zr_weight, {}, 1, padding),
+      Conv2dIn(precision_, torch::cat({hidden, motion}, 1), zr_weight, {}, padding),
       terms.narrow(1, 0, 2 * hid)));
   const torch::Tensor z = zr.narrow(1, 0, hid);
   const torch::Tensor r = zr.narrow(1, hid, hid);
   const torch::Tensor q = torch::tanh(AddPerReference(
-      torch::conv2d(torch::cat({r * hidden, motion}, 1), PairColumns(convq, columns), {}, 1,
-                    padding),
+      Conv2dIn(precision_, torch::cat({r * hidden, motion}, 1), PairColumns(convq, columns), {},
+               padding),
       terms.narrow(1, 2 * hid, hid)));
   return (1 - z) * hidden + z * q;
 }
@@ -165,6 +165,11 @@ UpdateBlockImpl::UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_ch
       register_module("mask_conv2", Conv(2 * hid, 9 * upsample_factor * upsample_factor, 1));
 }
 
+void UpdateBlockImpl::set_precision(Precision precision) {
+  precision_ = precision;
+  gru_->set_precision(precision);
+}
+
 torch::Tensor UpdateBlockImpl::ContextTerms(const torch::Tensor& context) {
   return gru_->ContextTerms(context);
 }
@@ -189,17 +194,24 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
   CheckInput(correlation, "correlation", batch, correlation_channels_, h, w);
   CheckInput(eflow, "eflow", batch, 1, h, w);
 
-  torch::Tensor corr = torch::relu(corr_conv1_->forward(correlation));
-  corr = torch::relu(corr_conv2_->forward(corr));
-  torch::Tensor flow = torch::relu(eflow_conv1_->forward(eflow));
-  flow = torch::relu(eflow_conv2_->forward(flow));
-  const torch::Tensor motion =
-      torch::cat({torch::relu(motion_conv_->forward(torch::cat({corr, flow}, 1))), eflow}, 1);
+  const Precision p = precision_;
+  // The motion encoder's and the heads' chains stay in the block's precision
+  // from one convolution to the next (relu commutes with the rounding);
+  // what leaves them, and the GRU's state, is fp32.
+  torch::Tensor corr = torch::relu(Conv2dIn(p, corr_conv1_, InPrecision(p, correlation)));
+  corr = torch::relu(Conv2dIn(p, corr_conv2_, corr));
+  torch::Tensor flow = torch::relu(Conv2dIn(p, eflow_conv1_, InPrecision(p, eflow)));
+  flow = torch::relu(Conv2dIn(p, eflow_conv2_, flow));
+  const torch::Tensor motion = torch::cat(
+      {torch::relu(Conv2dIn(p, motion_conv_, torch::cat({corr, flow}, 1))).to(eflow.scalar_type()),
+       eflow},
+      1);
 
   UpdateBlockOutput out;
   out.hidden = gru_->forward(hidden, motion, context_terms);
   const torch::Tensor heads =
-      head_conv2_->forward(torch::relu(head_conv1_->forward(out.hidden)));
+      Conv2dIn(p, head_conv2_, torch::relu(Conv2dIn(p, head_conv1_, InPrecision(p, out.hidden))))
+          .to(out.hidden.scalar_type());
   out.delta_eflow = heads.narrow(1, 0, 1);
   out.weight_logit = heads.narrow(1, 1, 1);
   return out;
@@ -248,7 +260,10 @@ torch::Tensor UpdateBlockImpl::MaskLogits(const torch::Tensor& hidden) {
     throw std::invalid_argument("UpdateBlock::MaskLogits: hidden must be [B," +
                                 std::to_string(hidden_channels_) + ",h,w]");
   }
-  return 0.25 * mask_conv2_->forward(torch::relu(mask_conv1_->forward(hidden)));
+  const Precision p = precision_;
+  return 0.25 * Conv2dIn(p, mask_conv2_,
+                         torch::relu(Conv2dIn(p, mask_conv1_, InPrecision(p, hidden))))
+                    .to(hidden.scalar_type());
 }
 
 }  // namespace dispmvs::model

@@ -18,6 +18,8 @@
 
 #include <torch/torch.h>
 
+#include "model/precision.h"
+
 namespace dispmvs::model {
 
 // GRU whose gates are two separable convolutions: first 1x5 (horizontal
@@ -46,6 +48,9 @@ class SepConvGruImpl : public torch::nn::Module {
   torch::Tensor forward(torch::Tensor hidden, const torch::Tensor& motion,
                         const torch::Tensor& context_terms);
 
+  // The arithmetic of the gate convolutions (precision.h); fp32 by default.
+  void set_precision(Precision precision) { precision_ = precision; }
+
  private:
   torch::Tensor Step(const torch::Tensor& hidden, const torch::Tensor& motion,
                      const torch::Tensor& terms, torch::nn::Conv2d& convz,
@@ -54,6 +59,7 @@ class SepConvGruImpl : public torch::nn::Module {
   int64_t hidden_channels_;
   int64_t motion_channels_;
   int64_t context_channels_;
+  Precision precision_ = Precision::kFloat32;
   torch::nn::Conv2d convz1_{nullptr}, convr1_{nullptr}, convq1_{nullptr};
   torch::nn::Conv2d convz2_{nullptr}, convr2_{nullptr}, convq2_{nullptr};
 };
@@ -94,10 +100,16 @@ class UpdateBlockImpl : public torch::nn::Module {
   int64_t hidden_channels() const { return hidden_channels_; }
   int64_t upsample_factor() const { return upsample_factor_; }
 
+  // The arithmetic of every convolution of the block, the GRU's included
+  // (precision.h): fp32 by default. Inference only: the trainer keeps fp32.
+  void set_precision(Precision precision);
+  Precision precision() const { return precision_; }
+
  private:
   int64_t correlation_channels_;
   int64_t hidden_channels_;
   int64_t upsample_factor_;
+  Precision precision_ = Precision::kFloat32;
 
   // Motion encoder.
   torch::nn::Conv2d corr_conv1_{nullptr}, corr_conv2_{nullptr};

@@ -20,6 +20,7 @@
 #include "model/config.h"
 #include "model/device.h"
 #include "model/dispmvs_net.h"
+#include "model/host_allocator.h"
 #include "model/loss.h"
 #include "model/matching_loss.h"
 #include "model/safetensors.h"
@@ -571,6 +572,12 @@ void TrainOptions::Check(bool for_training) const {
     }
     if (value > 0 && for_training) fail(std::string(name) + " is for evaluation only");
   }
+  try {
+    model::ResolvePrecision(eval_precision, torch::kCPU);
+  } catch (const std::invalid_argument& error) {
+    fail(error.what());
+  }
+  if (eval_precision != "fp32" && for_training) fail("precision is for evaluation only");
   if (scene_reuse < 1 || scene_reuse > 64) fail("scene_reuse must be in [1, 64], got " + std::to_string(scene_reuse));
   if (!(std::isfinite(max_cpu_minutes) && max_cpu_minutes >= 0)) {
     fail("max_cpu_minutes must be a finite number >= 0, got " + std::to_string(max_cpu_minutes));
@@ -786,6 +793,7 @@ void Train(const TrainOptions& options, std::ostream& console) {
   options.Check(/*for_training=*/true);
   const torch::Device device = model::ParseUsableDevice(options.device);
   SetThreads(options.threads);
+  if (device.is_cpu()) model::KeepFreedTensorMemory();
   const fs::path dir = options.checkpoint_dir;
   fs::create_directories(dir);
   Logger log(console, dir / "train.log");
@@ -870,12 +878,14 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
   const torch::Device device = model::ParseUsableDevice(options.device);
   if (options.num_validation_scenes < 1) throw std::invalid_argument("num_validation_scenes must be >= 1");
   SetThreads(options.threads);
+  if (device.is_cpu()) model::KeepFreedTensorMemory();
   const ModelConfig config = model::ReadModelConfig(weights_path);
   DispMvsNet net(config);
   model::LoadModuleWeights(*net, weights_path);
   net->set_iterations(
       options.eval_coarse_iterations > 0 ? options.eval_coarse_iterations : config.coarse_iterations,
       options.eval_fine_iterations > 0 ? options.eval_fine_iterations : config.fine_iterations);
+  net->set_precision(model::ResolvePrecision(options.eval_precision, device));
   net->to(device);
   const auto scenes = ValidationScenes(options, device);
   return Validate(net, scenes, options, widenings, /*look_from_sources=*/true);

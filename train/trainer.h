@@ -94,6 +94,10 @@ struct TrainOptions {
   // (dispmvs_colmap --fine_iterations); this measures what they cost.
   int64_t eval_coarse_iterations = 0;
   int64_t eval_fine_iterations = 0;
+  // Evaluation only: the arithmetic of the GRU update's convolutions, "fp32",
+  // "bf16" or "auto" (model/precision.h), to measure what bf16 costs in
+  // accuracy. Training is always fp32.
+  std::string eval_precision = "fp32";
   // Curriculum (synth::SynthConfig::difficulty): generated training scenes
   // start at difficulty_start and reach full difficulty (1) linearly over
   // difficulty_ramp_steps steps. Validation is always at full difficulty.
