@@ -2,6 +2,7 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <system_error>
 #include <vector>
@@ -78,6 +79,22 @@ int RemoveLeftoverTemporaries(const std::filesystem::path& path) {
     if (ec) throw IoError(leftover.string(), "cannot remove a leftover temporary file: " + ec.message());
   }
   return static_cast<int>(leftovers.size());
+}
+
+std::vector<std::string> NamesWithTemporaries(const std::filesystem::path& folder) {
+  std::error_code ec;
+  if (!std::filesystem::is_directory(folder, ec)) return {};
+  std::filesystem::directory_iterator entries(folder, ec);
+  if (ec) throw IoError(folder.string(), "cannot list: " + ec.message());
+  std::vector<std::string> names;
+  for (const auto& entry : entries) {
+    const std::string file = entry.path().filename().string();
+    const std::size_t mark = file.rfind(kTemporaryMark);
+    if (mark != std::string::npos && mark > 0) names.push_back(file.substr(0, mark));
+  }
+  std::sort(names.begin(), names.end());
+  names.erase(std::unique(names.begin(), names.end()), names.end());
+  return names;
 }
 
 }  // namespace dispmvs::colmap_io

@@ -9,6 +9,7 @@
 #include <fstream>
 #include <functional>
 #include <string>
+#include <vector>
 
 namespace dispmvs::colmap_io {
 
@@ -46,5 +47,11 @@ void WriteFileAtomically(const std::filesystem::path& path,
 // would be deleted under it. Returns how many were removed; a missing folder
 // is none. Throws IoError when the folder cannot be listed or a file removed.
 int RemoveLeftoverTemporaries(const std::filesystem::path& path);
+
+// The file names NAME in `folder` that have leftover temporaries beside them
+// ("NAME.tmp-*"), each once, sorted: one listing to find which outputs
+// RemoveLeftoverTemporaries has work for. A missing folder has none. Throws
+// IoError when the folder cannot be listed.
+std::vector<std::string> NamesWithTemporaries(const std::filesystem::path& folder);
 
 }  // namespace dispmvs::colmap_io

@@ -128,6 +128,19 @@ TEST(AtomicFileTest, RemoveLeftoverTemporariesTakesOnlyThatFilesTemporaries) {
   EXPECT_EQ(RemoveLeftoverTemporaries(dir.path() / "missing" / "out.bin"), 0);
 }
 
+TEST(AtomicFileTest, NamesWithTemporariesListsEachOutputOnce) {
+  TempDir dir;
+  WriteFileBytes(dir.path() / "a.txt", "complete, no temporary");
+  WriteFileBytes(dir.path() / "b.txt.tmp-4242-0", "x");
+  WriteFileBytes(dir.path() / "b.txt.tmp-77-13", "x");
+  WriteFileBytes(dir.path() / "c.bin.vis.tmp-1-0", "x");
+  WriteFileBytes(dir.path() / "plain.tmp", "not a temporary name");
+  EXPECT_EQ(NamesWithTemporaries(dir.path()), (std::vector<std::string>{"b.txt", "c.bin.vis"}));
+  EXPECT_EQ(RemoveLeftoverTemporaries(dir.path() / "b.txt"), 2);
+  EXPECT_EQ(NamesWithTemporaries(dir.path()), (std::vector<std::string>{"c.bin.vis"}));
+  EXPECT_TRUE(NamesWithTemporaries(dir.path() / "missing").empty());
+}
+
 TEST(AtomicFileTest, RemoveLeftoverTemporariesFindsTheWritersOwnNames) {
   // The names it removes are the ones AtomicFileWriter makes: here a live
   // writer's, which is why only a caller that excludes other writers may

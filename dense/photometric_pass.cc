@@ -1,5 +1,6 @@
 #include "dense/photometric_pass.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <optional>
@@ -31,6 +32,25 @@ void PhotometricOptions::Check() const {
   }
 }
 
+int RemoveRecordLeftovers(const Workspace& workspace, const std::vector<std::string>& complete) {
+  // One listing of the records folder; in the common case it has nothing.
+  const std::vector<std::string> with_leftovers =
+      NamesWithTemporaries(ViewRecordPath(workspace, "any").parent_path());
+  if (with_leftovers.empty()) return 0;
+  int removed = 0;
+  for (const std::string& name : complete) {
+    const std::filesystem::path record_path = ViewRecordPath(workspace, name);
+    if (!std::binary_search(with_leftovers.begin(), with_leftovers.end(),
+                            record_path.filename().string())) {
+      continue;
+    }
+    // A process still writing this record holds the view's claim.
+    const std::optional<ViewClaim> claim = ViewClaim::TryClaim(ClaimPath(workspace, name));
+    if (claim) removed += RemoveLeftoverTemporaries(record_path);
+  }
+  return removed;
+}
+
 PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan,
                                const PhotometricOptions& options, std::ostream& log) {
   options.Check();
@@ -41,6 +61,7 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
   // Work out what is left before loading the network (a finished run
   // resumes instantly).
   std::vector<const StereoProblem*> todo;
+  std::vector<std::string> complete;
   for (const StereoProblem& problem : plan.problems) {
     const std::string& name = plan.ImageOf(problem.reference_image_id).name;
     if (problem.source_image_ids.empty()) {
@@ -48,9 +69,15 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       log << "photometric: " << name << ": no usable source view, skipped\n";
     } else if (!options.overwrite && PathsOf(workspace, name, kPhotometricType).AllExist()) {
       ++summary.skipped_existing;
+      complete.push_back(name);
     } else {
       todo.push_back(&problem);
     }
+  }
+  const int record_leftovers = RemoveRecordLeftovers(workspace, complete);
+  if (record_leftovers > 0) {
+    log << "photometric: " << record_leftovers
+        << " temporary record file(s) of an interrupted run removed\n";
   }
   log << "photometric: " << todo.size() << " view(s) to compute, " << summary.skipped_existing
       << " already done" << (summary.skipped_existing > 0 ? " (kept; --overwrite recomputes)" : "")

@@ -10,6 +10,8 @@
 
 #include <cstdint>
 #include <ostream>
+#include <string>
+#include <vector>
 
 #include "colmap_io/workspace.h"
 #include "dense/depth_estimator.h"
@@ -34,6 +36,15 @@ struct PhotometricOptions {
 // to compute has none (CheckHintsForWeights).
 PassSummary RunPhotometricPass(const colmap_io::Workspace& workspace, const DensePlan& plan,
                                const PhotometricOptions& options, std::ostream& log);
+
+// Removes the record temporaries (colmap_io/view_record.h) that a run killed
+// between a view's maps and its record left beside the records of the
+// `complete` views (their maps all exist, so no later run claims them to
+// clear the rest), each under the view's claim: a view another process
+// holds keeps its files. Returns how many files it removed. The photometric
+// pass calls it on the views it skips as done.
+int RemoveRecordLeftovers(const colmap_io::Workspace& workspace,
+                          const std::vector<std::string>& complete);
 
 // The seed of a view's random initialisation: a function of the run's seed
 // and the image alone, so that results do not depend on order, sharding or

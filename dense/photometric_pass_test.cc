@@ -158,6 +158,38 @@ TEST_F(PhotometricPassTest, SkipsAViewAnotherProcessHasClaimed) {
       << log_.str();
 }
 
+// A run killed after a view's maps and before its record committed leaves
+// the record's temporary; the view is complete, so the next run skips it
+// and clears that file, unless another process holds the view.
+TEST_F(PhotometricPassTest, ClearsRecordTemporariesOfCompleteViews) {
+  const PassSummary first = RunPhotometricPass(workspace_, plan_, options_, log_);
+  ASSERT_EQ(first.done, 7) << log_.str();
+  const std::string& cleared = names_[1];
+  const std::string& held = names_[4];
+  const fs::path cleared_temporary =
+      colmap_io::ViewRecordPath(workspace_, cleared).string() + ".tmp-999999-7";
+  const fs::path held_temporary =
+      colmap_io::ViewRecordPath(workspace_, held).string() + ".tmp-999999-8";
+  for (const fs::path& path : {cleared_temporary, held_temporary}) std::ofstream(path) << "partial";
+  std::optional<ViewClaim> claim = ViewClaim::TryClaim(ClaimPath(workspace_, held));
+  ASSERT_TRUE(claim.has_value());
+
+  log_.str("");
+  const PassSummary second = RunPhotometricPass(workspace_, plan_, options_, log_);
+  EXPECT_EQ(second.skipped_existing, 7);
+  EXPECT_FALSE(fs::exists(cleared_temporary));
+  EXPECT_TRUE(fs::exists(held_temporary));
+  EXPECT_TRUE(fs::exists(colmap_io::ViewRecordPath(workspace_, cleared)));  // the record stays
+  EXPECT_NE(log_.str().find("photometric: 1 temporary record file(s) of an interrupted run removed"),
+            std::string::npos)
+      << log_.str();
+
+  claim.reset();
+  EXPECT_EQ(RemoveRecordLeftovers(workspace_, names_), 1);
+  EXPECT_FALSE(fs::exists(held_temporary));
+  EXPECT_EQ(RemoveRecordLeftovers(workspace_, names_), 0);
+}
+
 TEST(ViewSeedTest, DependsOnRunSeedAndImageOnly) {
   std::set<uint64_t> seeds;
   for (uint64_t run : {0u, 1u, 2u}) {
