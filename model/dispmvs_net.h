@@ -132,8 +132,8 @@ class DispMvsNetImpl : public torch::nn::Module {
   void set_iterations(int64_t coarse, int64_t fine);
 
   // The arithmetic of the GRU update blocks' convolutions in later passes
-  // (precision.h; fp32 by default): bf16 is twice as fast on a CPU with
-  // native bf16 (docs/benchmarks.md). The encoders, the correlation and the
+  // (precision.h; fp32 by default): in bf16 a pass is about a sixth faster
+  // on a CPU with native bf16 (docs/benchmarks.md). The encoders, the correlation and the
   // geometry stay fp32. For inference: training keeps fp32.
   void set_precision(Precision precision);
   Precision precision() const { return precision_; }

@@ -2,13 +2,15 @@
 // The arithmetic the network's convolutions run in at inference, chosen at
 // run time (--precision of the programs).
 //
-// bf16 convolutions are three times faster than fp32 on a CPU with native
-// bf16 dot products (AVX-512 BF16 or AMX; docs/benchmarks.md), and slower
-// than fp32 where oneDNN has to emulate them. Only the convolutions of the
-// encoders and of the GRU update block take bf16 inputs and weights; their
-// outputs come back as fp32 at once, so the hidden state, the E-flow, the
-// correlation, triangulation and fusion all stay fp32 (bf16 keeps 8 bits of
-// mantissa: too few for a position along an epipolar line or a depth).
+// bf16 convolutions are 1.5-4x faster than fp32 on a CPU with native bf16
+// dot products (AVX-512 BF16 or AMX), the GRU update block as a whole about
+// 1.4x (docs/benchmarks.md); where oneDNN has to emulate bf16 they are
+// slower than fp32. Only the convolutions of the GRU update blocks take bf16
+// inputs and weights (the encoders in bf16 measured no faster); their
+// outputs come back as fp32 (after a conv -> relu -> conv chain at most), so
+// the hidden state, the E-flow, the encoders' features, the correlation,
+// triangulation and fusion all stay fp32 (bf16 keeps 8 bits of mantissa:
+// too few for a position along an epipolar line or a depth).
 
 #include <string>
 
