@@ -10,11 +10,15 @@ namespace dispmvs::colmap_io {
 
 namespace fs = std::filesystem;
 
+fs::path ViewRecordFolder(const Workspace& workspace) {
+  return workspace.StereoDir() / "dispmvs_records";
+}
+
 fs::path ViewRecordPath(const Workspace& workspace, const std::string& image_name) {
   // DepthMapPath throws IoError for a name that would leave the workspace
   // ("..", an absolute path); the records follow the same rule.
   workspace.DepthMapPath(image_name, "record");
-  return workspace.StereoDir() / "dispmvs_records" / (image_name + ".txt");
+  return ViewRecordFolder(workspace) / (image_name + ".txt");
 }
 
 void WriteViewRecord(const fs::path& path, const ViewRecord& record) {

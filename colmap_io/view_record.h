@@ -31,6 +31,8 @@ struct ViewRecord {
   std::string device;
 };
 
+// WS/stereo/dispmvs_records, the folder of every view's record.
+std::filesystem::path ViewRecordFolder(const Workspace& workspace);
 std::filesystem::path ViewRecordPath(const Workspace& workspace, const std::string& image_name);
 
 // Atomically (colmap_io/atomic_file.h); throws IoError when it cannot.

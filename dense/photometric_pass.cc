@@ -35,7 +35,7 @@ void PhotometricOptions::Check() const {
 int RemoveRecordLeftovers(const Workspace& workspace, const std::vector<std::string>& complete) {
   // One listing of the records folder; in the common case it has nothing.
   const std::vector<std::string> with_leftovers =
-      NamesWithTemporaries(ViewRecordPath(workspace, "any").parent_path());
+      NamesWithTemporaries(ViewRecordFolder(workspace));
   if (with_leftovers.empty()) return 0;
   int removed = 0;
   for (const std::string& name : complete) {

@@ -671,7 +671,6 @@ void DispMvsNetImpl::set_iterations(int64_t coarse, int64_t fine) {
 }
 
 void DispMvsNetImpl::set_precision(Precision precision) {
-  precision_ = precision;
   coarse_block_->set_precision(precision);
   fine_block_->set_precision(precision);
 }

@@ -136,7 +136,7 @@ class DispMvsNetImpl : public torch::nn::Module {
   // on a CPU with native bf16 (docs/benchmarks.md). The encoders, the correlation and the
   // geometry stay fp32. For inference: training keeps fp32.
   void set_precision(Precision precision);
-  Precision precision() const { return precision_; }
+  Precision precision() const { return coarse_block_->precision(); }
 
   // Times the stages of every later forward pass into `timer` (not owned;
   // null detaches). For benchmarks: see stage_timer.h.
@@ -149,7 +149,6 @@ class DispMvsNetImpl : public torch::nn::Module {
   UpdateBlock coarse_block_{nullptr};
   UpdateBlock fine_block_{nullptr};
   StageTimer* stage_timer_ = nullptr;
-  Precision precision_ = Precision::kFloat32;
 };
 TORCH_MODULE(DispMvsNet);
 

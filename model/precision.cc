@@ -46,12 +46,24 @@ torch::Tensor InPrecision(Precision precision, const torch::Tensor& x) {
   return precision == Precision::kBFloat16 ? x.to(torch::kBFloat16) : x;
 }
 
+namespace {
+
+// conv2d with x, weight and bias rounded to bf16, the result in x's dtype.
+torch::Tensor Bf16Conv2d(const torch::Tensor& x, const torch::Tensor& weight,
+                         const torch::Tensor& bias, torch::IntArrayRef stride,
+                         torch::IntArrayRef padding, torch::IntArrayRef dilation, int64_t groups) {
+  const auto low = torch::kBFloat16;
+  return torch::conv2d(x.to(low), weight.to(low), bias.defined() ? bias.to(low) : bias, stride,
+                       padding, dilation, groups)
+      .to(x.scalar_type());
+}
+
+}  // namespace
+
 torch::Tensor Conv2dIn(Precision precision, const torch::Tensor& x, const torch::Tensor& weight,
                        const torch::Tensor& bias, torch::IntArrayRef padding) {
   if (precision == Precision::kFloat32) return torch::conv2d(x, weight, bias, 1, padding);
-  const auto low = torch::kBFloat16;
-  return torch::conv2d(x.to(low), weight.to(low), bias.defined() ? bias.to(low) : bias, 1, padding)
-      .to(x.scalar_type());
+  return Bf16Conv2d(x, weight, bias, 1, padding, 1, 1);
 }
 
 torch::Tensor Conv2dIn(Precision precision, const torch::nn::Conv2d& conv, const torch::Tensor& x) {
@@ -61,11 +73,8 @@ torch::Tensor Conv2dIn(Precision precision, const torch::nn::Conv2d& conv, const
   if (padding == nullptr || !c10::holds_alternative<torch::enumtype::kZeros>(options.padding_mode())) {
     throw std::invalid_argument("Conv2dIn: the module's padding must be explicit sizes of zeros");
   }
-  const auto low = torch::kBFloat16;
-  const torch::Tensor bias = conv->bias.defined() ? conv->bias.to(low) : conv->bias;
-  return torch::conv2d(x.to(low), conv->weight.to(low), bias, options.stride(), *padding,
-                       options.dilation(), options.groups())
-      .to(x.scalar_type());
+  return Bf16Conv2d(x, conv->weight, conv->bias, options.stride(), *padding, options.dilation(),
+                    options.groups());
 }
 
 }  // namespace dispmvs::model

@@ -166,7 +166,6 @@ UpdateBlockImpl::UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_ch
 }
 
 void UpdateBlockImpl::set_precision(Precision precision) {
-  precision_ = precision;
   gru_->set_precision(precision);
 }
 
@@ -194,7 +193,7 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
   CheckInput(correlation, "correlation", batch, correlation_channels_, h, w);
   CheckInput(eflow, "eflow", batch, 1, h, w);
 
-  const Precision p = precision_;
+  const Precision p = precision();
   // The motion encoder's and the heads' chains stay in the block's precision
   // from one convolution to the next (relu commutes with the rounding);
   // what leaves them, and the GRU's state, is fp32.
@@ -260,7 +259,7 @@ torch::Tensor UpdateBlockImpl::MaskLogits(const torch::Tensor& hidden) {
     throw std::invalid_argument("UpdateBlock::MaskLogits: hidden must be [B," +
                                 std::to_string(hidden_channels_) + ",h,w]");
   }
-  const Precision p = precision_;
+  const Precision p = precision();
   return 0.25 * Conv2dIn(p, mask_conv2_,
                          torch::relu(Conv2dIn(p, mask_conv1_, InPrecision(p, hidden))))
                     .to(hidden.scalar_type());

@@ -50,6 +50,7 @@ class SepConvGruImpl : public torch::nn::Module {
 
   // The arithmetic of the gate convolutions (precision.h); fp32 by default.
   void set_precision(Precision precision) { precision_ = precision; }
+  Precision precision() const { return precision_; }
 
  private:
   torch::Tensor Step(const torch::Tensor& hidden, const torch::Tensor& motion,
@@ -103,13 +104,12 @@ class UpdateBlockImpl : public torch::nn::Module {
   // The arithmetic of every convolution of the block, the GRU's included
   // (precision.h): fp32 by default. Inference only: the trainer keeps fp32.
   void set_precision(Precision precision);
-  Precision precision() const { return precision_; }
+  Precision precision() const { return gru_->precision(); }
 
  private:
   int64_t correlation_channels_;
   int64_t hidden_channels_;
   int64_t upsample_factor_;
-  Precision precision_ = Precision::kFloat32;
 
   // Motion encoder.
   torch::nn::Conv2d corr_conv1_{nullptr}, corr_conv2_{nullptr};
