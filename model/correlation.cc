@@ -3,6 +3,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "model/correlation_cpu.h"
 #include "model/grid_coordinates.h"
 
 namespace dispmvs::model {
@@ -47,6 +48,13 @@ EpipolarCorrelation::EpipolarCorrelation(const torch::Tensor& source_features, i
     pyramid_.push_back(F::avg_pool2d(pyramid_.back(),
                                      F::AvgPool2dFuncOptions(2).stride(2).ceil_mode(true)));
   }
+  // Inference on the CPU reads channels-last copies of the levels (the fused
+  // lookup of correlation_cpu.h).
+  if (CanUseFusedCorrelation(source_features, source_features)) {
+    for (const torch::Tensor& level : pyramid_) {
+      levels_hwc_.push_back(level.permute({0, 2, 3, 1}).contiguous());
+    }
+  }
 }
 
 CorrelationSamples EpipolarCorrelation::Lookup(const torch::Tensor& ref_features,
@@ -78,6 +86,7 @@ CorrelationSamples EpipolarCorrelation::Lookup(const torch::Tensor& ref_features
   // [B, C, samples, h, w] floats twice (the samples and their products with
   // the reference), 1.1 GB at the fine stage of 1600x1152 with 5 sources;
   // one at a time holds a samples-th of it, for the same arithmetic.
+  const bool fused = !levels_hwc_.empty() && CanUseFusedCorrelation(src0, ref_features);
   std::vector<torch::Tensor> costs;
   std::vector<torch::Tensor> insides;
   costs.reserve(pyramid_.size() * static_cast<size_t>(samples_));
@@ -92,6 +101,7 @@ CorrelationSamples EpipolarCorrelation::Lookup(const torch::Tensor& ref_features
     const torch::Tensor py = centre.narrow(1, 1, 1) + offsets * dir_y;
     insides.push_back((px >= 0) & (px <= static_cast<double>(width_l - 1)) & (py >= 0) &
                       (py <= static_cast<double>(height_l - 1)));
+    if (fused) continue;
     const torch::Tensor grid =
         torch::stack({ToGridCoordinate(px, width_l), ToGridCoordinate(py, height_l)}, -1);
     for (int64_t k = 0; k < samples_; ++k) {
@@ -105,7 +115,10 @@ CorrelationSamples EpipolarCorrelation::Lookup(const torch::Tensor& ref_features
                       static_cast<double>(channels));
     }
   }
-  return {torch::cat(costs, 1), torch::cat(insides, 1)};
+  const torch::Tensor cost =
+      fused ? FusedCorrelationLookup(levels_hwc_, ref_features, match, dir, samples_)
+            : torch::cat(costs, 1);
+  return {cost, torch::cat(insides, 1)};
 }
 
 }  // namespace dispmvs::model

@@ -59,6 +59,9 @@ class EpipolarCorrelation {
 
  private:
   std::vector<torch::Tensor> pyramid_;
+  // The levels as [B,H_l,W_l,C], made only for inference on the CPU, where
+  // Lookup runs the fused pass of correlation_cpu.h; empty otherwise.
+  std::vector<torch::Tensor> levels_hwc_;
   int64_t samples_;
 };
 

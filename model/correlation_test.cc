@@ -1,6 +1,8 @@
 #include "model/correlation.h"
 
 #include <cmath>
+#include <optional>
+#include <string>
 #include <stdexcept>
 #include <vector>
 
@@ -67,9 +69,19 @@ double Bilinear(const Map& m, int64_t c, double x, double y) {
   return sum;
 }
 
-TEST(EpipolarCorrelationTest, MatchesNaivePerPixelLoop) {
+// Both paths of Lookup: the ATen ops (autograd on, as in training) and the
+// fused CPU pass of correlation_cpu.h (inference). C = 19 exercises the
+// fused pass's vector lanes and its tail.
+class EpipolarCorrelationPathTest : public ::testing::TestWithParam<bool> {
+ protected:
+  bool inference() const { return GetParam(); }
+};
+
+TEST_P(EpipolarCorrelationPathTest, MatchesNaivePerPixelLoop) {
+  std::optional<torch::NoGradGuard> no_grad;
+  if (inference()) no_grad.emplace();
   torch::manual_seed(7);
-  const int64_t B = 2, C = 3, H = 7, W = 6, h = 4, w = 5, levels = 3, samples = 5;
+  const int64_t B = 2, C = 19, H = 7, W = 6, h = 4, w = 5, levels = 3, samples = 5;
   const torch::Tensor source = torch::randn({B, C, H, W});
   const torch::Tensor ref = torch::randn({B, C, h, w});
   const torch::Tensor base = torch::rand({B, 2, h, w}) * 10.0 - 2.0;  // some outside
@@ -138,7 +150,9 @@ TEST(EpipolarCorrelationTest, SampleSpacingIsOnePixelOfEachLevel) {
   }
 }
 
-TEST(EpipolarCorrelationTest, OutsideSamplesReadZeroAndAreReported) {
+TEST_P(EpipolarCorrelationPathTest, OutsideSamplesReadZeroAndAreReported) {
+  std::optional<torch::NoGradGuard> no_grad;
+  if (inference()) no_grad.emplace();
   const torch::Tensor ones = torch::ones({1, 2, 4, 4});
   const EpipolarCorrelation corr(ones, 1, 3);
   const torch::Tensor ref = torch::ones({1, 2, 1, 1});
@@ -158,6 +172,32 @@ TEST(EpipolarCorrelationTest, OutsideSamplesReadZeroAndAreReported) {
   const torch::Tensor far = torch::tensor({1e30f, std::nanf("")}).view({1, 2, 1, 1});
   const torch::Tensor far_cost = corr.Lookup(ref, far, dir, eflow).cost;
   EXPECT_TRUE(torch::all(far_cost == 0).item<bool>());
+}
+
+INSTANTIATE_TEST_SUITE_P(AtenAndFused, EpipolarCorrelationPathTest, ::testing::Bool(),
+                         [](const ::testing::TestParamInfo<bool>& info) {
+                           return info.param ? std::string("FusedInference")
+                                             : std::string("AtenOps");
+                         });
+
+// The two paths against each other at a realistic size (48 channels, two
+// levels, a match partly off the map), including a reference feature map
+// with non-contiguous strides, as the network's repeated maps can be.
+TEST(EpipolarCorrelationTest, FusedInferenceEqualsAtenOps) {
+  torch::manual_seed(3);
+  const int64_t B = 3, C = 48, H = 30, W = 40, h = 30, w = 40;
+  const torch::Tensor source = torch::randn({B, C, H, W});
+  const torch::Tensor ref = torch::randn({B, w, h, C}).permute({0, 3, 2, 1});
+  const torch::Tensor base = torch::rand({B, 2, h, w}) * 50.0 - 5.0;
+  const torch::Tensor angle = torch::rand({B, 1, h, w}) * 6.283;
+  const torch::Tensor dir = torch::cat({torch::cos(angle), torch::sin(angle)}, 1);
+  const torch::Tensor eflow = torch::randn({B, 1, h, w}) * 3.0;
+  const CorrelationSamples aten = EpipolarCorrelation(source, 2, 5).Lookup(ref, base, dir, eflow);
+  torch::NoGradGuard no_grad;
+  const CorrelationSamples fused = EpipolarCorrelation(source, 2, 5).Lookup(ref, base, dir, eflow);
+  EXPECT_TRUE(torch::equal(fused.inside, aten.inside));
+  EXPECT_LT((fused.cost - aten.cost).abs().max().item<float>(), 1e-5f);
+  EXPECT_GT(aten.cost.abs().mean().item<float>(), 0.01f);  // not a comparison of zeros
 }
 
 TEST(EpipolarCorrelationTest, GradientReachesEflowAndFeatures) {

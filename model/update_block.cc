@@ -87,6 +87,19 @@ torch::Tensor AddPerReference(torch::Tensor pre, const torch::Tensor& terms) {
   return pre;
 }
 
+// pre + terms as AddPerReference, written into a new fp32 (`options`) map:
+// one pass that also widens a bf16 convolution output.
+torch::Tensor AddPerReferenceInto(const torch::Tensor& pre, const torch::Tensor& terms,
+                                  const torch::TensorOptions& options) {
+  const int64_t refs = terms.size(0);
+  const std::vector<int64_t> grouped{refs, pre.size(0) / refs, pre.size(1), pre.size(2),
+                                     pre.size(3)};
+  torch::Tensor out = torch::empty(pre.sizes(), options);
+  torch::Tensor out_grouped = out.view(grouped);
+  torch::add_out(out_grouped, pre.reshape(grouped), terms.unsqueeze(1));
+  return out;
+}
+
 // The [hidden, motion] columns of a gate convolution's weight.
 torch::Tensor PairColumns(const nn::Conv2d& conv, int64_t columns) {
   return conv->weight.narrow(1, 0, columns);
@@ -114,8 +127,8 @@ torch::Tensor SepConvGruImpl::Step(const torch::Tensor& hidden, const torch::Ten
   return (1 - z) * hidden + z * q;
 }
 
-torch::Tensor SepConvGruImpl::forward(torch::Tensor hidden, const torch::Tensor& motion,
-                                      const torch::Tensor& context_terms) {
+void SepConvGruImpl::CheckForwardInput(const torch::Tensor& hidden, const torch::Tensor& motion,
+                                       const torch::Tensor& context_terms) const {
   const int64_t hid = hidden_channels_;
   if (!hidden.defined() || !motion.defined() || !context_terms.defined() || hidden.dim() != 4 ||
       motion.dim() != 4 || context_terms.dim() != 4 || hidden.size(1) != hid ||
@@ -129,9 +142,55 @@ torch::Tensor SepConvGruImpl::forward(torch::Tensor hidden, const torch::Tensor&
         std::to_string(motion_channels_) + ",h,w] and context terms [R," +
         std::to_string(6 * hid) + ",h,w] with B' a multiple of R");
   }
+}
+
+torch::Tensor SepConvGruImpl::forward(torch::Tensor hidden, const torch::Tensor& motion,
+                                      const torch::Tensor& context_terms) {
+  const int64_t hid = hidden_channels_;
+  CheckForwardInput(hidden, motion, context_terms);
   hidden = Step(hidden, motion, context_terms.narrow(1, 0, 3 * hid), convz1_, convr1_, convq1_);
   return Step(hidden, motion, context_terms.narrow(1, 3 * hid, 3 * hid), convz2_, convr2_,
               convq2_);
+}
+
+torch::Tensor SepConvGruImpl::StepInPlace(const torch::Tensor& hidden, torch::Tensor& gate_input,
+                                          const torch::Tensor& terms, nn::Conv2d& convz,
+                                          nn::Conv2d& convr, nn::Conv2d& convq) {
+  const int64_t hid = hidden_channels_, columns = hidden_channels_ + motion_channels_;
+  const std::vector<int64_t> padding = SamePadding(convz->weight);
+  torch::Tensor state_part = gate_input.narrow(1, 0, hid);  // a view: writes land in the buffer
+  state_part.copy_(hidden);  // rounded to the convolution's dtype, as Step's cat
+  const torch::Tensor zr_weight =
+      torch::cat({PairColumns(convz, columns), PairColumns(convr, columns)}, 0);
+  const torch::Tensor zr =
+      AddPerReferenceInto(Conv2dIn(precision_, gate_input, zr_weight, {}, padding),
+                          terms.narrow(1, 0, 2 * hid), hidden.options())
+          .sigmoid_();
+  const torch::Tensor z = zr.narrow(1, 0, hid);
+  torch::mul_out(state_part, zr.narrow(1, hid, hid), hidden);  // r * hidden
+  const torch::Tensor q =
+      AddPerReferenceInto(Conv2dIn(precision_, gate_input, PairColumns(convq, columns), {}, padding),
+                          terms.narrow(1, 2 * hid, hid), hidden.options())
+          .tanh_();
+  return torch::lerp(hidden, q, z);  // (1 - z) hidden + z q
+}
+
+torch::Tensor SepConvGruImpl::ForwardInPlace(torch::Tensor hidden, torch::Tensor& gate_input,
+                                             const torch::Tensor& context_terms) {
+  if (torch::GradMode::is_enabled()) {
+    throw std::logic_error("SepConvGru::ForwardInPlace is for inference (autograd off)");
+  }
+  const int64_t hid = hidden_channels_;
+  if (!gate_input.defined() || gate_input.dim() != 4 ||
+      gate_input.size(1) != hid + motion_channels_ || !gate_input.is_contiguous()) {
+    throw std::invalid_argument("SepConvGru: gate_input must be a contiguous [B'," +
+                                std::to_string(hid + motion_channels_) + ",h,w] buffer");
+  }
+  CheckForwardInput(hidden, gate_input.narrow(1, hid, motion_channels_), context_terms);
+  hidden = StepInPlace(hidden, gate_input, context_terms.narrow(1, 0, 3 * hid), convz1_, convr1_,
+                       convq1_);
+  return StepInPlace(hidden, gate_input, context_terms.narrow(1, 3 * hid, 3 * hid), convz2_,
+                     convr2_, convq2_);
 }
 
 UpdateBlockImpl::UpdateBlockImpl(int64_t correlation_channels, int64_t hidden_channels,
@@ -201,13 +260,24 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
   corr = torch::relu(Conv2dIn(p, corr_conv2_, corr));
   torch::Tensor flow = torch::relu(Conv2dIn(p, eflow_conv1_, InPrecision(p, eflow)));
   flow = torch::relu(Conv2dIn(p, eflow_conv2_, flow));
-  const torch::Tensor motion = torch::cat(
-      {torch::relu(Conv2dIn(p, motion_conv_, torch::cat({corr, flow}, 1))).to(eflow.scalar_type()),
-       eflow},
-      1);
+  const torch::Tensor motion_features =
+      torch::relu(Conv2dIn(p, motion_conv_, torch::cat({corr, flow}, 1)));
 
   UpdateBlockOutput out;
-  out.hidden = gru_->forward(hidden, motion, context_terms);
+  if (torch::GradMode::is_enabled()) {
+    const torch::Tensor motion =
+        torch::cat({motion_features.to(eflow.scalar_type()), eflow}, 1);
+    out.hidden = gru_->forward(hidden, motion, context_terms);
+  } else {
+    // Inference: the gates' input buffer, its motion part (the encoder's
+    // hid - 1 channels, then the raw E-flow) written once for both passes.
+    const int64_t hid = hidden_channels_;
+    torch::Tensor gate_input =
+        torch::empty({batch, 2 * hid, h, w}, hidden.options().dtype(ScalarTypeOf(p)));
+    gate_input.narrow(1, hid, hid - 1).copy_(motion_features);
+    gate_input.narrow(1, 2 * hid - 1, 1).copy_(eflow);
+    out.hidden = gru_->ForwardInPlace(hidden, gate_input, context_terms);
+  }
   const torch::Tensor heads =
       Conv2dIn(p, head_conv2_, torch::relu(Conv2dIn(p, head_conv1_, InPrecision(p, out.hidden))))
           .to(out.hidden.scalar_type());

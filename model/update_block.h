@@ -48,6 +48,16 @@ class SepConvGruImpl : public torch::nn::Module {
   torch::Tensor forward(torch::Tensor hidden, const torch::Tensor& motion,
                         const torch::Tensor& context_terms);
 
+  // forward() for inference (autograd off), with less memory traffic: the
+  // caller gives the gate convolutions' input as one buffer
+  // [B', hidden + motion, h, w] in the convolutions' dtype (bf16 or fp32,
+  // see precision()) with the motion already in channels hidden.. ; the
+  // hidden part is scratch. The element-wise gate arithmetic runs in place
+  // in fp32, and the new state is lerp(hidden, q, z). Same values as
+  // forward() up to float rounding (update_block_test).
+  torch::Tensor ForwardInPlace(torch::Tensor hidden, torch::Tensor& gate_input,
+                               const torch::Tensor& context_terms);
+
   // The arithmetic of the gate convolutions (precision.h); fp32 by default.
   void set_precision(Precision precision) { precision_ = precision; }
   Precision precision() const { return precision_; }
@@ -56,6 +66,11 @@ class SepConvGruImpl : public torch::nn::Module {
   torch::Tensor Step(const torch::Tensor& hidden, const torch::Tensor& motion,
                      const torch::Tensor& terms, torch::nn::Conv2d& convz,
                      torch::nn::Conv2d& convr, torch::nn::Conv2d& convq);
+  torch::Tensor StepInPlace(const torch::Tensor& hidden, torch::Tensor& gate_input,
+                            const torch::Tensor& terms, torch::nn::Conv2d& convz,
+                            torch::nn::Conv2d& convr, torch::nn::Conv2d& convq);
+  void CheckForwardInput(const torch::Tensor& hidden, const torch::Tensor& motion,
+                         const torch::Tensor& context_terms) const;
 
   int64_t hidden_channels_;
   int64_t motion_channels_;

@@ -149,6 +149,50 @@ TEST(UpdateBlockTest, ContextTermsGiveTheTextbookGru) {
                std::invalid_argument);
 }
 
+// Inference (autograd off) runs the GRU through ForwardInPlace, training
+// through forward(): the same values, in fp32 to float rounding and in bf16
+// to what one bf16 rounding of a gate input can move.
+TEST(UpdateBlockTest, InferencePathMatchesTrainingPath) {
+  torch::manual_seed(9);
+  UpdateBlock block(/*correlation_channels=*/10, /*hidden=*/8, /*context=*/6, /*factor=*/4);
+  for (auto& p : block->parameters()) {
+    torch::NoGradGuard no_grad;
+    p.uniform_(-0.3, 0.3);
+  }
+  const int64_t references = 2, pairs = 6, h = 6, w = 7;
+  const torch::Tensor hidden = torch::randn({pairs, 8, h, w}).tanh();
+  const torch::Tensor context = torch::randn({references, 6, h, w}).relu();
+  const torch::Tensor cost = torch::randn({pairs, 10, h, w});
+  const torch::Tensor eflow = torch::randn({pairs, 1, h, w});
+  for (const Precision precision : {Precision::kFloat32, Precision::kBFloat16}) {
+    block->set_precision(precision);
+    const UpdateBlockOutput training =
+        block->forward(hidden, block->ContextTerms(context), cost, eflow);
+    torch::NoGradGuard no_grad;
+    const UpdateBlockOutput inference =
+        block->forward(hidden, block->ContextTerms(context), cost, eflow);
+    const float tolerance = precision == Precision::kFloat32 ? 1e-5f : 2e-2f;
+    const char* name = PrecisionName(precision);
+    EXPECT_LT((inference.hidden - training.hidden).abs().max().item<float>(), tolerance) << name;
+    EXPECT_LT((inference.delta_eflow - training.delta_eflow).abs().max().item<float>(), tolerance)
+        << name;
+    EXPECT_LT((inference.weight_logit - training.weight_logit).abs().max().item<float>(),
+              tolerance)
+        << name;
+    EXPECT_GT((inference.hidden - hidden).abs().max().item<float>(), 0.05f) << name;  // it moved
+  }
+  // The in-place path refuses autograd and a buffer of the wrong shape.
+  SepConvGru gru(/*hidden=*/4, /*motion=*/4, /*context=*/3);
+  torch::Tensor buffer = torch::zeros({2, 8, h, w});
+  const torch::Tensor terms = gru->ContextTerms(torch::zeros({1, 3, h, w}));
+  EXPECT_THROW(gru->ForwardInPlace(torch::zeros({2, 4, h, w}), buffer, terms), std::logic_error);
+  torch::NoGradGuard no_grad;
+  torch::Tensor narrow_buffer = torch::zeros({2, 7, h, w});
+  EXPECT_THROW(gru->ForwardInPlace(torch::zeros({2, 4, h, w}), narrow_buffer, terms),
+               std::invalid_argument);
+  EXPECT_NO_THROW(gru->ForwardInPlace(torch::zeros({2, 4, h, w}), buffer, terms));
+}
+
 TEST(UpdateBlockTest, GradientReachesEveryParameter) {
   torch::manual_seed(5);
   UpdateBlock block(6, 4, 3, 2);
