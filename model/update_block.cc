@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include "model/gru_gates_cpu.h"
+
 namespace dispmvs::model {
 namespace {
 
@@ -162,16 +164,22 @@ torch::Tensor SepConvGruImpl::StepInPlace(const torch::Tensor& hidden, torch::Te
   state_part.copy_(hidden);  // rounded to the convolution's dtype, as Step's cat
   const torch::Tensor zr_weight =
       torch::cat({PairColumns(convz, columns), PairColumns(convr, columns)}, 0);
-  const torch::Tensor zr =
-      AddPerReferenceInto(Conv2dIn(precision_, gate_input, zr_weight, {}, padding),
-                          terms.narrow(1, 0, 2 * hid), hidden.options())
-          .sigmoid_();
+  const torch::Tensor zr_pre = Conv2dIn(precision_, gate_input, zr_weight, {}, padding);
+  const torch::Tensor zr_terms = terms.narrow(1, 0, 2 * hid);
+  const torch::Tensor q_terms = terms.narrow(1, 2 * hid, hid);
+  const auto q_pre = [&] {
+    return Conv2dIn(precision_, gate_input, PairColumns(convq, columns), {}, padding);
+  };
+  if (CanUseFusedGates(zr_pre, hidden)) {
+    // The CPU's two fused passes (gru_gates_cpu.h); r * hidden goes
+    // straight into the buffer.
+    const torch::Tensor z = FusedUpdateAndResetGates(zr_pre, zr_terms, hidden, gate_input);
+    return FusedCandidateBlend(q_pre(), q_terms, hidden, z);
+  }
+  const torch::Tensor zr = AddPerReferenceInto(zr_pre, zr_terms, hidden.options()).sigmoid_();
   const torch::Tensor z = zr.narrow(1, 0, hid);
   torch::mul_out(state_part, zr.narrow(1, hid, hid), hidden);  // r * hidden
-  const torch::Tensor q =
-      AddPerReferenceInto(Conv2dIn(precision_, gate_input, PairColumns(convq, columns), {}, padding),
-                          terms.narrow(1, 2 * hid, hid), hidden.options())
-          .tanh_();
+  const torch::Tensor q = AddPerReferenceInto(q_pre(), q_terms, hidden.options()).tanh_();
   return torch::lerp(hidden, q, z);  // (1 - z) hidden + z q
 }
 
@@ -187,7 +195,7 @@ torch::Tensor SepConvGruImpl::ForwardInPlace(torch::Tensor hidden, torch::Tensor
                                 std::to_string(hid + motion_channels_) + ",h,w] buffer");
   }
   CheckForwardInput(hidden, gate_input.narrow(1, hid, motion_channels_), context_terms);
-  hidden = StepInPlace(hidden, gate_input, context_terms.narrow(1, 0, 3 * hid), convz1_, convr1_,
+  hidden = StepInPlace(hidden.contiguous(), gate_input, context_terms.narrow(1, 0, 3 * hid), convz1_, convr1_,
                        convq1_);
   return StepInPlace(hidden, gate_input, context_terms.narrow(1, 3 * hid, 3 * hid), convz2_,
                      convr2_, convq2_);
