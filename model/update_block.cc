@@ -164,11 +164,12 @@ torch::Tensor SepConvGruImpl::StepInPlace(const torch::Tensor& hidden, torch::Te
   state_part.copy_(hidden);  // rounded to the convolution's dtype, as Step's cat
   const torch::Tensor zr_weight =
       torch::cat({PairColumns(convz, columns), PairColumns(convr, columns)}, 0);
-  const torch::Tensor zr_pre = Conv2dIn(precision_, gate_input, zr_weight, {}, padding);
+  const torch::Tensor zr_pre =
+      Conv2dIn(precision_, gate_input, zr_weight, {}, padding).contiguous();
   const torch::Tensor zr_terms = terms.narrow(1, 0, 2 * hid);
   const torch::Tensor q_terms = terms.narrow(1, 2 * hid, hid);
   const auto q_pre = [&] {
-    return Conv2dIn(precision_, gate_input, PairColumns(convq, columns), {}, padding);
+    return Conv2dIn(precision_, gate_input, PairColumns(convq, columns), {}, padding).contiguous();
   };
   if (CanUseFusedGates(zr_pre, hidden)) {
     // The CPU's two fused passes (gru_gates_cpu.h); r * hidden goes
@@ -280,8 +281,9 @@ UpdateBlockOutput UpdateBlockImpl::forward(const torch::Tensor& hidden,
     // Inference: the gates' input buffer, its motion part (the encoder's
     // hid - 1 channels, then the raw E-flow) written once for both passes.
     const int64_t hid = hidden_channels_;
-    torch::Tensor gate_input =
-        torch::empty({batch, 2 * hid, h, w}, hidden.options().dtype(ScalarTypeOf(p)));
+    const torch::ScalarType gate_dtype =
+        p == Precision::kBFloat16 ? torch::kBFloat16 : hidden.scalar_type();
+    torch::Tensor gate_input = torch::empty({batch, 2 * hid, h, w}, hidden.options().dtype(gate_dtype));
     gate_input.narrow(1, hid, hid - 1).copy_(motion_features);
     gate_input.narrow(1, 2 * hid - 1, 1).copy_(eflow);
     out.hidden = gru_->ForwardInPlace(hidden, gate_input, context_terms);

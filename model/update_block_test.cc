@@ -181,6 +181,20 @@ TEST(UpdateBlockTest, InferencePathMatchesTrainingPath) {
         << name;
     EXPECT_GT((inference.hidden - hidden).abs().max().item<float>(), 0.05f) << name;  // it moved
   }
+  // Where the fused CPU passes do not apply (here a float64 block; on a GPU
+  // every map), ForwardInPlace's ATen ops serve: the same values too.
+  {
+    UpdateBlock wide(/*correlation_channels=*/10, /*hidden=*/8, /*context=*/6, /*factor=*/4);
+    wide->to(torch::kFloat64);
+    const auto d = [](const torch::Tensor& t) { return t.to(torch::kFloat64); };
+    const UpdateBlockOutput training =
+        wide->forward(d(hidden), wide->ContextTerms(d(context)), d(cost), d(eflow));
+    torch::NoGradGuard no_grad;
+    const UpdateBlockOutput inference =
+        wide->forward(d(hidden), wide->ContextTerms(d(context)), d(cost), d(eflow));
+    EXPECT_LT((inference.hidden - training.hidden).abs().max().item<double>(), 1e-12);
+    EXPECT_LT((inference.delta_eflow - training.delta_eflow).abs().max().item<double>(), 1e-12);
+  }
   // The in-place path refuses autograd and a buffer of the wrong shape.
   SepConvGru gru(/*hidden=*/4, /*motion=*/4, /*context=*/3);
   torch::Tensor buffer = torch::zeros({2, 8, h, w});
