@@ -11,10 +11,10 @@
 namespace dispmvs::model {
 namespace {
 
-// Row loops are also built for AVX2+FMA and AVX-512 and picked at load time
+// Row loops are also built for AVX2 and AVX-512 and picked at load time
 // by the processor (the library itself targets the baseline x86-64).
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define DISPMVS_CPU_CLONES __attribute__((target_clones("default", "arch=x86-64-v3", "arch=x86-64-v4")))
+#define DISPMVS_CPU_CLONES __attribute__((target_clones("default", "avx2", "avx512f")))
 #else
 #define DISPMVS_CPU_CLONES
 #endif

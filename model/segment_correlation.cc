@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "model/correlation_cpu.h"
 #include "model/grid_coordinates.h"
 
 namespace dispmvs::model {
@@ -37,6 +38,39 @@ torch::Tensor Interpolate1d(const torch::Tensor& vol, const torch::Tensor& u) {
     return torch::where(exists, value, torch::zeros_like(value));
   };
   return read(i0) * (1.0 - frac) + read(i1) * frac;
+}
+
+// The level-0 volume [B,L,h,w] with ATen ops (autograd, any device),
+// kChunk samples at a time; eflows [B,L,h,w] the samples' E-flows.
+torch::Tensor AtenVolume(const torch::Tensor& ref_features, const torch::Tensor& src_features,
+                         const EpipolarSegment& segment, const torch::Tensor& eflows) {
+  const int64_t batch = src_features.size(0), channels = src_features.size(1);
+  const int64_t src_h = src_features.size(2), src_w = src_features.size(3);
+  const int64_t h = ref_features.size(2), w = ref_features.size(3);
+  const int64_t length = eflows.size(1);
+  const torch::Tensor base_x = segment.base_xy.narrow(1, 0, 1);
+  const torch::Tensor base_y = segment.base_xy.narrow(1, 1, 1);
+  const torch::Tensor dir_x = segment.dir.narrow(1, 0, 1);
+  const torch::Tensor dir_y = segment.dir.narrow(1, 1, 1);
+  const torch::Tensor ref = ref_features.unsqueeze(2);  // [B,C,1,h,w]
+  std::vector<torch::Tensor> chunks;
+  for (int64_t k0 = 0; k0 < length; k0 += kChunk) {
+    const int64_t n = std::min(kChunk, length - k0);
+    const torch::Tensor e = eflows.narrow(1, k0, n);
+    const torch::Tensor px = base_x + e * dir_x;
+    const torch::Tensor py = base_y + e * dir_y;
+    const torch::Tensor grid =
+        torch::stack({ToGridCoordinate(px, src_w), ToGridCoordinate(py, src_h)}, -1).view({batch, n * h, w, 2});
+    const torch::Tensor sampled =
+        F::grid_sample(src_features, grid,
+                       F::GridSampleFuncOptions()
+                           .mode(torch::kBilinear)
+                           .padding_mode(torch::kZeros)
+                           .align_corners(false))
+            .view({batch, channels, n, h, w});
+    chunks.push_back((sampled * ref).sum(1) / static_cast<double>(channels));
+  }
+  return torch::cat(chunks, 1);
 }
 
 }  // namespace
@@ -84,29 +118,18 @@ SegmentCorrelation::SegmentCorrelation(const torch::Tensor& ref_features,
   const torch::Tensor eflows = segment.start + steps;  // [B,L,h,w]
   inside_ = segment.valid & (eflows <= segment.end + 1e-3);
 
-  const torch::Tensor base_x = segment.base_xy.narrow(1, 0, 1);
-  const torch::Tensor base_y = segment.base_xy.narrow(1, 1, 1);
-  const torch::Tensor dir_x = segment.dir.narrow(1, 0, 1);
-  const torch::Tensor dir_y = segment.dir.narrow(1, 1, 1);
-  const torch::Tensor ref = ref_features.unsqueeze(2);  // [B,C,1,h,w]
-  std::vector<torch::Tensor> chunks;
-  for (int64_t k0 = 0; k0 < length; k0 += kChunk) {
-    const int64_t n = std::min(kChunk, length - k0);
-    const torch::Tensor e = eflows.narrow(1, k0, n);
-    const torch::Tensor px = base_x + e * dir_x;
-    const torch::Tensor py = base_y + e * dir_y;
-    const torch::Tensor grid =
-        torch::stack({ToGridCoordinate(px, src_w), ToGridCoordinate(py, src_h)}, -1).view({batch, n * h, w, 2});
-    const torch::Tensor sampled =
-        F::grid_sample(src_features, grid,
-                       F::GridSampleFuncOptions()
-                           .mode(torch::kBilinear)
-                           .padding_mode(torch::kZeros)
-                           .align_corners(false))
-            .view({batch, channels, n, h, w});
-    chunks.push_back((sampled * ref).sum(1) / static_cast<double>(channels));
+  torch::Tensor volume;
+  if (CanUseFusedCorrelation(src_features, ref_features)) {
+    // Inference on the CPU: the fused lookup of correlation_cpu.h, centred
+    // on the middle of the L samples, gives them all in one pass (sample k
+    // at base + (start + k) dir, to float rounding).
+    const torch::Tensor centre =
+        segment.base_xy + (segment.start + 0.5 * static_cast<double>(length - 1)) * segment.dir;
+    volume = FusedCorrelationLookup({src_features.permute({0, 2, 3, 1}).contiguous()},
+                                    ref_features, centre, segment.dir, length);
+  } else {
+    volume = AtenVolume(ref_features, src_features, segment, eflows);
   }
-  torch::Tensor volume = torch::cat(chunks, 1);
   volume = torch::where(inside_, volume, torch::zeros_like(volume));
 
   pyramid_.push_back(volume);

@@ -267,6 +267,35 @@ TEST(SegmentCorrelation, VolumeIsTheDotProductAlongTheSegment) {
   }
 }
 
+// Inference on the CPU builds the volume with the fused lookup of
+// correlation_cpu.h; training with ATen ops. Random segments (some invalid,
+// some leaving the map) on float features: the same volume to float
+// rounding, and the same best matches.
+TEST(SegmentCorrelation, FusedInferenceVolumeEqualsAtenVolume) {
+  torch::manual_seed(21);
+  const int64_t b = 3, c = 64, h = 12, w = 16, src_h = 20, src_w = 26;
+  const torch::Tensor ref = torch::randn({b, c, h, w});
+  const torch::Tensor src = torch::randn({b, c, src_h, src_w});
+  EpipolarSegment seg;
+  seg.base_xy = torch::rand({b, 2, h, w}) * 30.0 - 2.0;
+  const torch::Tensor angle = torch::rand({b, 1, h, w}) * 6.283;
+  seg.dir = torch::cat({torch::cos(angle), torch::sin(angle)}, 1);
+  seg.start = torch::rand({b, 1, h, w}) * -20.0;
+  seg.end = seg.start + torch::rand({b, 1, h, w}) * 30.0;
+  seg.valid = torch::rand({b, 1, h, w}) > 0.1;
+  const SegmentCorrelation aten(ref, src, seg, /*levels=*/3, /*samples=*/9);
+  torch::NoGradGuard no_grad;
+  const SegmentCorrelation fused(ref, src, seg, /*levels=*/3, /*samples=*/9);
+  ASSERT_EQ(fused.length(), aten.length());
+  EXPECT_TRUE(torch::equal(fused.inside(), aten.inside()));
+  EXPECT_LT((fused.volume() - aten.volume()).abs().max().item<float>(), 1e-5f);
+  EXPECT_GT(aten.volume().abs().mean().item<float>(), 0.01f);  // not a comparison of zeros
+  const torch::Tensor match_xy = seg.base_xy + seg.dir * (seg.start + 3.3);
+  EXPECT_LT((fused.Lookup(match_xy).cost - aten.Lookup(match_xy).cost).abs().max().item<float>(),
+            1e-5f);
+  EXPECT_LT((fused.BestMatch().eflow - aten.BestMatch().eflow).abs().max().item<float>(), 1e-3f);
+}
+
 TEST(SegmentCorrelation, LookupInterpolatesAlongTheSegment) {
   torch::manual_seed(4);
   const int64_t c = 4, h = 2, w = 2;
