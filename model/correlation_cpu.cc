@@ -6,6 +6,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "model/cpu_clones.h"
+
 namespace dispmvs::model {
 namespace {
 
@@ -15,13 +17,8 @@ constexpr int64_t kLanes = 16;
 
 // sum_c ref[c] * (w[0] s0[c] + w[1] s1[c] + w[2] s2[c] + w[3] s3[c]): the
 // dot product of the reference feature with the bilinear blend of the four
-// corner features. On x86 with GCC, also built for AVX2 and AVX-512 and
-// picked at load time by the processor (the library itself is built for the
-// baseline x86-64).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-__attribute__((target_clones("default", "avx2", "avx512f")))
-#endif
-float BlendedDot(const float* ref, const float* s0, const float* s1, const float* s2,
+// corner features (cpu_clones.h: also built for AVX2 and AVX-512).
+DISPMVS_CPU_CLONES float BlendedDot(const float* ref, const float* s0, const float* s1, const float* s2,
                  const float* s3, float w0, float w1, float w2, float w3, int64_t channels) {
   float lanes[kLanes] = {};
   int64_t c = 0;

@@ -8,16 +8,11 @@
 #include <stdexcept>
 #include <string>
 
+#include "model/cpu_clones.h"
+
 namespace dispmvs::model {
 namespace {
 
-// Row loops are also built for AVX2 and AVX-512 and picked at load time
-// by the processor (the library itself targets the baseline x86-64).
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
-#define DISPMVS_CPU_CLONES __attribute__((target_clones("default", "avx2", "avx512f")))
-#else
-#define DISPMVS_CPU_CLONES
-#endif
 #define DISPMVS_INLINE inline __attribute__((always_inline))
 
 DISPMVS_INLINE float BitsToFloat(uint32_t bits) {

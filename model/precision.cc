@@ -42,10 +42,6 @@ Precision ResolvePrecision(const std::string& text, const torch::Device& device,
   throw std::invalid_argument(what + " must be auto, fp32 or bf16, got '" + text + "'");
 }
 
-torch::ScalarType ScalarTypeOf(Precision precision) {
-  return precision == Precision::kBFloat16 ? torch::kBFloat16 : torch::kFloat32;
-}
-
 torch::Tensor InPrecision(Precision precision, const torch::Tensor& x) {
   return precision == Precision::kBFloat16 ? x.to(torch::kBFloat16) : x;
 }

@@ -34,9 +34,6 @@ bool CpuHasNativeBf16();
 Precision ResolvePrecision(const std::string& text, const torch::Device& device,
                            const std::string& what = "precision");
 
-// The dtype of `precision`'s operands: kFloat32 or kBFloat16.
-torch::ScalarType ScalarTypeOf(Precision precision);
-
 // x in `precision`'s dtype (a no-op for kFloat32, and for an x already in
 // bf16): for chains of convolutions that stay in bf16 between them.
 torch::Tensor InPrecision(Precision precision, const torch::Tensor& x);

@@ -89,19 +89,6 @@ torch::Tensor AddPerReference(torch::Tensor pre, const torch::Tensor& terms) {
   return pre;
 }
 
-// pre + terms as AddPerReference, written into a new fp32 (`options`) map:
-// one pass that also widens a bf16 convolution output.
-torch::Tensor AddPerReferenceInto(const torch::Tensor& pre, const torch::Tensor& terms,
-                                  const torch::TensorOptions& options) {
-  const int64_t refs = terms.size(0);
-  const std::vector<int64_t> grouped{refs, pre.size(0) / refs, pre.size(1), pre.size(2),
-                                     pre.size(3)};
-  torch::Tensor out = torch::empty(pre.sizes(), options);
-  torch::Tensor out_grouped = out.view(grouped);
-  torch::add_out(out_grouped, pre.reshape(grouped), terms.unsqueeze(1));
-  return out;
-}
-
 // The [hidden, motion] columns of a gate convolution's weight.
 torch::Tensor PairColumns(const nn::Conv2d& conv, int64_t columns) {
   return conv->weight.narrow(1, 0, columns);
@@ -177,10 +164,13 @@ torch::Tensor SepConvGruImpl::StepInPlace(const torch::Tensor& hidden, torch::Te
     const torch::Tensor z = FusedUpdateAndResetGates(zr_pre, zr_terms, hidden, gate_input);
     return FusedCandidateBlend(q_pre(), q_terms, hidden, z);
   }
-  const torch::Tensor zr = AddPerReferenceInto(zr_pre, zr_terms, hidden.options()).sigmoid_();
+  // Elsewhere (a GPU, float64): ATen ops, in place on fp32 copies of the
+  // convolution outputs (new tensors when they are bf16).
+  const torch::Tensor zr =
+      AddPerReference(zr_pre.to(hidden.scalar_type()), zr_terms).sigmoid_();
   const torch::Tensor z = zr.narrow(1, 0, hid);
   torch::mul_out(state_part, zr.narrow(1, hid, hid), hidden);  // r * hidden
-  const torch::Tensor q = AddPerReferenceInto(q_pre(), q_terms, hidden.options()).tanh_();
+  const torch::Tensor q = AddPerReference(q_pre().to(hidden.scalar_type()), q_terms).tanh_();
   return torch::lerp(hidden, q, z);  // (1 - z) hidden + z q
 }
 

@@ -52,9 +52,10 @@ class SepConvGruImpl : public torch::nn::Module {
   // caller gives the gate convolutions' input as one buffer
   // [B', hidden + motion, h, w] in the convolutions' dtype (bf16 or fp32,
   // see precision()) with the motion already in channels hidden.. ; the
-  // hidden part is scratch. The element-wise gate arithmetic runs in place
-  // in fp32, and the new state is lerp(hidden, q, z). Same values as
-  // forward() up to float rounding (update_block_test).
+  // hidden part is scratch. The element-wise gate arithmetic runs in the
+  // state's dtype: on the CPU in the two fused passes of gru_gates_cpu.h,
+  // elsewhere in place with ATen ops. Same values as forward() up to float
+  // rounding (update_block_test).
   torch::Tensor ForwardInPlace(torch::Tensor hidden, torch::Tensor& gate_input,
                                const torch::Tensor& context_terms);
 

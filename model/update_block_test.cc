@@ -150,8 +150,9 @@ TEST(UpdateBlockTest, ContextTermsGiveTheTextbookGru) {
 }
 
 // Inference (autograd off) runs the GRU through ForwardInPlace, training
-// through forward(): the same values, in fp32 to float rounding and in bf16
-// to what one bf16 rounding of a gate input can move.
+// through forward(): the same values, in fp32 to float rounding, and in bf16
+// to what a gate input rounded the other way can move (2^-8 of an input of
+// magnitude < 1 through weights of at most 0.3: below 2e-3; measured 2e-7).
 TEST(UpdateBlockTest, InferencePathMatchesTrainingPath) {
   torch::manual_seed(9);
   UpdateBlock block(/*correlation_channels=*/10, /*hidden=*/8, /*context=*/6, /*factor=*/4);
@@ -171,7 +172,7 @@ TEST(UpdateBlockTest, InferencePathMatchesTrainingPath) {
     torch::NoGradGuard no_grad;
     const UpdateBlockOutput inference =
         block->forward(hidden, block->ContextTerms(context), cost, eflow);
-    const float tolerance = precision == Precision::kFloat32 ? 1e-5f : 2e-2f;
+    const float tolerance = precision == Precision::kFloat32 ? 1e-5f : 2e-3f;
     const char* name = PrecisionName(precision);
     EXPECT_LT((inference.hidden - training.hidden).abs().max().item<float>(), tolerance) << name;
     EXPECT_LT((inference.delta_eflow - training.delta_eflow).abs().max().item<float>(), tolerance)
