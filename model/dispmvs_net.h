@@ -134,7 +134,8 @@ class DispMvsNetImpl : public torch::nn::Module {
   // The arithmetic of the GRU update blocks' convolutions in later passes
   // (precision.h; fp32 by default): in bf16 a pass is about a sixth faster
   // on a CPU with native bf16 (docs/benchmarks.md). The encoders, the correlation and the
-  // geometry stay fp32. For inference: training keeps fp32.
+  // geometry stay fp32. Training may use it too (dispmvs_train --precision):
+  // autograd runs through the rounded convolutions into the fp32 weights.
   void set_precision(Precision precision);
   Precision precision() const { return coarse_block_->precision(); }
 

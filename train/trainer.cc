@@ -573,11 +573,10 @@ void TrainOptions::Check(bool for_training) const {
     if (value > 0 && for_training) fail(std::string(name) + " is for evaluation only");
   }
   try {
-    model::ResolvePrecision(eval_precision, torch::kCPU);
+    model::ResolvePrecision(precision, torch::kCPU);
   } catch (const std::invalid_argument& error) {
     fail(error.what());
   }
-  if (eval_precision != "fp32" && for_training) fail("precision is for evaluation only");
   if (scene_reuse < 1 || scene_reuse > 64) fail("scene_reuse must be in [1, 64], got " + std::to_string(scene_reuse));
   if (!(std::isfinite(max_cpu_minutes) && max_cpu_minutes >= 0)) {
     fail("max_cpu_minutes must be a finite number >= 0, got " + std::to_string(max_cpu_minutes));
@@ -777,7 +776,10 @@ void ValidateAndLog(DispMvsNet& net, const ModelConfig& config, const std::vecto
                     const TrainOptions& options, int64_t step, double cpu_start, Logger& log) {
   if (scenes.empty()) return;
   net->set_iterations(config.coarse_iterations, config.fine_iterations);
+  const model::Precision training_precision = net->precision();
+  net->set_precision(model::Precision::kFloat32);
   const WideningResult result = Validate(net, scenes, options, {1.0}, /*look_from_sources=*/false).front();
+  net->set_precision(training_precision);
   if (options.train_coarse_iterations > 0) {
     net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
   }
@@ -814,6 +816,8 @@ void Train(const TrainOptions& options, std::ostream& console) {
     net->set_iterations(options.train_coarse_iterations, config.fine_iterations);
   }
   net->train();
+  net->set_precision(model::ResolvePrecision(options.precision, device));
+  log.Line(std::string("GRU convolutions in ") + model::PrecisionName(net->precision()));
   const auto run_start = std::chrono::steady_clock::now();
   int64_t last_validated = -1;
   int64_t final_step = std::max(start, options.steps);
@@ -885,7 +889,7 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
   net->set_iterations(
       options.eval_coarse_iterations > 0 ? options.eval_coarse_iterations : config.coarse_iterations,
       options.eval_fine_iterations > 0 ? options.eval_fine_iterations : config.fine_iterations);
-  net->set_precision(model::ResolvePrecision(options.eval_precision, device));
+  net->set_precision(model::ResolvePrecision(options.precision, device));
   net->to(device);
   const auto scenes = ValidationScenes(options, device);
   return Validate(net, scenes, options, widenings, /*look_from_sources=*/true);

@@ -267,6 +267,29 @@ TEST(TrainerV2Test, EvaluationWithoutAHintOnlyForV2Weights) {
                std::invalid_argument);
 }
 
+// bf16 training steps: the rounding is in effect (other weights than fp32's)
+// yet the loss of the first step, same scene and same weights, stays within
+// bf16's reach of fp32's; the run says which arithmetic it used.
+TEST(TrainerV2Test, Bf16StepsTrainTheSameLossInOtherArithmetic) {
+  TempDir tmp;
+  std::ostringstream fp32_log, bf16_log;
+  const auto fp32_options = TinyV2Options(tmp.path() / "fp32", 2);
+  auto bf16_options = TinyV2Options(tmp.path() / "bf16", 2);
+  bf16_options.precision = "bf16";
+  Train(fp32_options, fp32_log);
+  Train(bf16_options, bf16_log);
+  EXPECT_NE(fp32_log.str().find("GRU convolutions in fp32"), std::string::npos) << fp32_log.str();
+  EXPECT_NE(bf16_log.str().find("GRU convolutions in bf16"), std::string::npos) << bf16_log.str();
+  EXPECT_NE(ReadFileBytes(tmp.path() / "fp32" / "model.safetensors"),
+            ReadFileBytes(tmp.path() / "bf16" / "model.safetensors"));
+  for (int step : {1, 2}) {
+    const StepLosses fp32 = LoggedStepLosses(fp32_log.str(), step);
+    const StepLosses bf16 = LoggedStepLosses(bf16_log.str(), step);
+    ASSERT_TRUE(std::isfinite(bf16.loss)) << bf16_log.str();
+    EXPECT_NEAR(bf16.loss, fp32.loss, 0.02 * std::abs(fp32.loss)) << "step " << step;
+  }
+}
+
 TEST(TrainerV2Test, DifficultyRampsLinearlyToOne) {
   TrainOptions o;
   EXPECT_EQ(TrainingDifficultyAt(o, 0), 1.0);
@@ -325,6 +348,9 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o = good;
   o.eval_coarse_iterations = -1;
   ExpectRejected(o, "eval_coarse_iterations");
+  o = good;
+  o.precision = "fp16";
+  ExpectRejected(o, "precision must be auto, fp32 or bf16");
   o = good;
   o.checkpoint_dir.clear();
   ExpectRejected(o, "checkpoint_dir");
