@@ -267,9 +267,14 @@ TEST(TrainerV2Test, EvaluationWithoutAHintOnlyForV2Weights) {
                std::invalid_argument);
 }
 
-// bf16 training steps: the rounding is in effect (other weights than fp32's)
-// yet the loss of the first step, same scene and same weights, stays within
-// bf16's reach of fp32's; the run says which arithmetic it used.
+// bf16 training steps. Step 1 (the matching warm-up) starts both runs from
+// the same weights on the same scene, and its logged depth loss is the
+// network's forward pass through the GRU: bf16 must change it (the rounding
+// is in effect) but by less than 1 %. bf16 keeps 8 bits of mantissa, a
+// relative rounding of 2^-9 per operand that averages out over the loss; 1 %
+// off fp32 would mean the arithmetic biases training rather than rounds it
+// (measured: 8e-5 at step 1, 3e-6 at step 2). The run says which arithmetic
+// it used.
 TEST(TrainerV2Test, Bf16StepsTrainTheSameLossInOtherArithmetic) {
   TempDir tmp;
   std::ostringstream fp32_log, bf16_log;
@@ -282,12 +287,14 @@ TEST(TrainerV2Test, Bf16StepsTrainTheSameLossInOtherArithmetic) {
   EXPECT_NE(bf16_log.str().find("GRU convolutions in bf16"), std::string::npos) << bf16_log.str();
   EXPECT_NE(ReadFileBytes(tmp.path() / "fp32" / "model.safetensors"),
             ReadFileBytes(tmp.path() / "bf16" / "model.safetensors"));
-  for (int step : {1, 2}) {
-    const StepLosses fp32 = LoggedStepLosses(fp32_log.str(), step);
-    const StepLosses bf16 = LoggedStepLosses(bf16_log.str(), step);
-    ASSERT_TRUE(std::isfinite(bf16.loss)) << bf16_log.str();
-    EXPECT_NEAR(bf16.loss, fp32.loss, 0.02 * std::abs(fp32.loss)) << "step " << step;
-  }
+  const StepLosses fp32_first = LoggedStepLosses(fp32_log.str(), 1);
+  const StepLosses bf16_first = LoggedStepLosses(bf16_log.str(), 1);
+  EXPECT_NE(bf16_first.depth, fp32_first.depth) << "the bf16 forward pass rounded nothing";
+  EXPECT_NEAR(bf16_first.depth, fp32_first.depth, 0.01 * std::abs(fp32_first.depth));
+  const StepLosses fp32_second = LoggedStepLosses(fp32_log.str(), 2);
+  const StepLosses bf16_second = LoggedStepLosses(bf16_log.str(), 2);
+  ASSERT_TRUE(std::isfinite(bf16_second.loss)) << bf16_log.str();
+  EXPECT_NEAR(bf16_second.loss, fp32_second.loss, 0.01 * std::abs(fp32_second.loss));
 }
 
 TEST(TrainerV2Test, DifficultyRampsLinearlyToOne) {
