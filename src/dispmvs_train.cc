@@ -88,6 +88,9 @@ options (default):
   --device cpu|cuda|cuda:I    (cpu)
   --threads T                 intra-op threads, 0 = one per core (0)
   --checkpoint_every K        (100)
+  --keep_weights_every K      keep the weights of every K-th step (a multiple of
+                              --checkpoint_every) as weights-<step>.safetensors, to choose the
+                              best checkpoint afterwards; 0 = only the latest checkpoint (0)
   --validate_every K          0 = only at the end (0)
   --val_scenes M              validation scenes (8)
   --val_seed_base S           first validation seed (1000000000)
@@ -209,6 +212,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--device") o.device = value;
     else if (flag == "--threads") o.threads = ParseInt(flag, value);
     else if (flag == "--checkpoint_every") o.checkpoint_every = ParseInt(flag, value);
+    else if (flag == "--keep_weights_every") o.keep_weights_every = ParseInt(flag, value);
     else if (flag == "--validate_every") o.validate_every = ParseInt(flag, value);
     else if (flag == "--val_scenes") o.num_validation_scenes = ParseInt(flag, value);
     else if (flag == "--val_seed_base") o.validation_seed_base = ParseUnsigned(flag, value);

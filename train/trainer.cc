@@ -188,6 +188,11 @@ fs::path WeightsPath(const fs::path& dir, int64_t step) { return dir / (StepName
 fs::path OptimPath(const fs::path& dir, int64_t step) {
   return dir / (StepName(step) + ".optim.safetensors");
 }
+fs::path KeptWeightsPath(const fs::path& dir, int64_t step) {
+  char buffer[32];
+  std::snprintf(buffer, sizeof buffer, "weights-%09lld.safetensors", static_cast<long long>(step));
+  return dir / buffer;
+}
 
 // Steps of the complete checkpoints in `dir` (both files present), ascending.
 std::vector<int64_t> CompleteCheckpoints(const fs::path& dir) {
@@ -341,8 +346,11 @@ typename StateMap::key_type AdamStateKey(const StateMap& /*state*/, const torch:
   }
 }
 
+// Writes checkpoint `step` and then retires the older ones: their weights
+// are kept under KeptWeightsPath when their step is a multiple of
+// keep_weights_every (> 0), removed otherwise; their optimiser state goes.
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,
-                    torch::optim::Adam& optimizer, const Settings& settings) {
+                    torch::optim::Adam& optimizer, const Settings& settings, int64_t keep_weights_every) {
   model::NamedTensors tensors;
   int64_t adam_step = -1;
   for (const auto& item : net->named_parameters()) {
@@ -370,7 +378,11 @@ void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const Mo
 
   for (int64_t older : CompleteCheckpoints(dir)) {
     if (older >= step) continue;
-    fs::remove(WeightsPath(dir, older));
+    if (keep_weights_every > 0 && older % keep_weights_every == 0) {
+      fs::rename(WeightsPath(dir, older), KeptWeightsPath(dir, older));
+    } else {
+      fs::remove(WeightsPath(dir, older));
+    }
     fs::remove(OptimPath(dir, older));
   }
 }
@@ -526,6 +538,10 @@ void TrainOptions::Check(bool for_training) const {
   model::ParseDevice(device);  // usable or not: checked when training starts
   if (threads < 0 || threads > 1024) fail("threads must be in [0, 1024], got " + std::to_string(threads));
   if (checkpoint_every < 1) fail("checkpoint_every must be >= 1, got " + std::to_string(checkpoint_every));
+  if (keep_weights_every < 0 || keep_weights_every % checkpoint_every != 0) {
+    fail("keep_weights_every must be 0 or a multiple of checkpoint_every (" + std::to_string(checkpoint_every) +
+         "), got " + std::to_string(keep_weights_every));
+  }
   if (validate_every < 0) fail("validate_every must be >= 0, got " + std::to_string(validate_every));
   if (num_validation_scenes < 0 || num_validation_scenes > 100'000) {
     fail("num_validation_scenes must be in [0, 100000], got " + std::to_string(num_validation_scenes));
@@ -856,7 +872,7 @@ void Train(const TrainOptions& options, std::ostream& console) {
     const bool out_of_wall_time = options.max_minutes > 0 && SecondsSince(run_start) >= 60.0 * options.max_minutes;
     const bool out_of_time = out_of_cpu_time || out_of_wall_time;
     if (done % options.checkpoint_every == 0 || done == options.steps || out_of_time) {
-      SaveCheckpoint(dir, done, net, config, optimizer, settings);
+      SaveCheckpoint(dir, done, net, config, optimizer, settings, options.keep_weights_every);
     }
     if (options.validate_every > 0 && done % options.validate_every == 0) {
       ValidateAndLog(net, config, validation_scenes, options, done, cpu_start, log);

@@ -11,6 +11,9 @@
 //   checkpoint-<step>.optim.safetensors  Adam moments per parameter, step and
 //                                        run settings in the metadata
 //   checkpoint-<step>.safetensors        the weights (SaveModuleWeights)
+//   weights-<step>.safetensors           with keep_weights_every K: the weights
+//                                        of every step that is a multiple of K,
+//                                        kept when a newer checkpoint replaces it
 //   model.safetensors                    the final weights
 //   train.log                            the log lines, appended
 // Both checkpoint files are written temp-then-rename; the weights file is
@@ -118,6 +121,12 @@ struct TrainOptions {
   int64_t threads = 0;         // intra-op threads; 0 = one per core
   std::string checkpoint_dir;  // required for training
   int64_t checkpoint_every = 100;
+  // Keep the weights of the checkpoints at multiples of K steps (renamed to
+  // weights-<step>.safetensors when a newer checkpoint replaces them; their
+  // optimiser state is still removed), so that a run's checkpoints can be
+  // compared afterwards and the best one chosen. 0 = keep only the latest.
+  // A multiple of checkpoint_every. Not a run setting: it changes no step.
+  int64_t keep_weights_every = 0;
   int64_t validate_every = 0;  // 0 = only at the end
   int64_t num_validation_scenes = 8;
   uint64_t validation_seed_base = kDefaultValidationSeedBase;

@@ -70,6 +70,37 @@ TEST(TrainerTest, ResumedRunEqualsStraightRunBitForBit) {
   EXPECT_EQ(ReadFileBytes(resumed_dir / "model.safetensors"), straight);
 }
 
+TEST(TrainerTest, KeptWeightsAreTheWeightsOfTheirStep) {
+  TempDir tmp;
+  auto options = TinyOptions(tmp.path() / "run", 5);
+  options.checkpoint_every = 1;
+  options.keep_weights_every = 2;
+  std::ostringstream log;
+  Train(options, log);
+
+  std::set<std::string> names;
+  for (const auto& entry : fs::directory_iterator(options.checkpoint_dir)) {
+    names.insert(entry.path().filename().string());
+  }
+  const std::set<std::string> expected{"weights-000000002.safetensors", "weights-000000004.safetensors",
+                                       "checkpoint-000000005.safetensors",
+                                       "checkpoint-000000005.optim.safetensors", "model.safetensors",
+                                       "train.log"};
+  EXPECT_EQ(names, expected);
+  // Step 2's kept weights are what a run of two steps ends with.
+  const std::string two_steps = RunAndReadWeights(TinyOptions(tmp.path() / "two", 2));
+  EXPECT_EQ(ReadFileBytes(fs::path(options.checkpoint_dir) / "weights-000000002.safetensors"), two_steps);
+  EXPECT_NE(ReadFileBytes(fs::path(options.checkpoint_dir) / "weights-000000004.safetensors"), two_steps);
+
+  // The kept files do not disturb resuming: the run goes on from step 5.
+  options.steps = 6;
+  std::ostringstream resumed;
+  Train(options, resumed);
+  EXPECT_NE(resumed.str().find("at step 5"), std::string::npos) << resumed.str();
+  EXPECT_TRUE(fs::exists(fs::path(options.checkpoint_dir) / "weights-000000004.safetensors"));
+  EXPECT_FALSE(fs::exists(fs::path(options.checkpoint_dir) / "checkpoint-000000005.safetensors"));
+}
+
 TEST(TrainerTest, CheckpointFilesAreCompleteAndOldOnesRemoved) {
   TempDir tmp;
   auto options = TinyOptions(tmp.path() / "run", 3);
@@ -346,6 +377,12 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o = good;
   o.checkpoint_every = 0;
   ExpectRejected(o, "checkpoint_every");
+  o = good;
+  o.checkpoint_every = 2;
+  o.keep_weights_every = 3;
+  ExpectRejected(o, "keep_weights_every must be 0 or a multiple of checkpoint_every (2), got 3");
+  o.keep_weights_every = -2;
+  ExpectRejected(o, "keep_weights_every");
   o = good;
   o.lr_warmup_steps = -1;
   ExpectRejected(o, "lr_warmup_steps");
