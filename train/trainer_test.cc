@@ -39,6 +39,12 @@ TrainOptions TinyOptions(const fs::path& dir, int64_t steps) {
   return o;
 }
 
+std::set<std::string> FileNames(const fs::path& dir) {
+  std::set<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) names.insert(entry.path().filename().string());
+  return names;
+}
+
 std::string RunAndReadWeights(const TrainOptions& options) {
   std::ostringstream log;
   Train(options, log);
@@ -78,10 +84,7 @@ TEST(TrainerTest, KeptWeightsAreTheWeightsOfTheirStep) {
   std::ostringstream log;
   Train(options, log);
 
-  std::set<std::string> names;
-  for (const auto& entry : fs::directory_iterator(options.checkpoint_dir)) {
-    names.insert(entry.path().filename().string());
-  }
+  const std::set<std::string> names = FileNames(options.checkpoint_dir);
   const std::set<std::string> expected{"weights-000000002.safetensors", "weights-000000004.safetensors",
                                        "checkpoint-000000005.safetensors",
                                        "checkpoint-000000005.optim.safetensors", "model.safetensors",
@@ -109,10 +112,7 @@ TEST(TrainerTest, CheckpointFilesAreCompleteAndOldOnesRemoved) {
   std::ostringstream log;
   Train(options, log);
 
-  std::set<std::string> names;
-  for (const auto& entry : fs::directory_iterator(options.checkpoint_dir)) {
-    names.insert(entry.path().filename().string());
-  }
+  const std::set<std::string> names = FileNames(options.checkpoint_dir);
   const std::set<std::string> expected{"checkpoint-000000003.safetensors",
                                        "checkpoint-000000003.optim.safetensors", "model.safetensors",
                                        "train.log"};
