@@ -328,6 +328,42 @@ TEST(TrainerV2Test, Bf16StepsTrainTheSameLossInOtherArithmetic) {
   EXPECT_NEAR(bf16_second.loss, fp32_second.loss, 0.01 * std::abs(fp32_second.loss));
 }
 
+// The validation inside a bf16 run is fp32 (its numbers compare across
+// runs whatever their --precision), and it puts the steps back in bf16.
+TEST(TrainerV2Test, InRunValidationIsFp32AndTheStepsStayBf16) {
+  TempDir tmp;
+  auto plain = TinyV2Options(tmp.path() / "plain", 3);
+  plain.precision = "bf16";
+  plain.height = 96;
+  plain.width = 128;
+  plain.num_validation_scenes = 2;
+  auto validated = plain;
+  validated.checkpoint_dir = (tmp.path() / "validated").string();
+  validated.validate_every = 1;
+  validated.checkpoint_every = 1;
+  validated.keep_weights_every = 1;
+  std::ostringstream plain_log, validated_log;
+  Train(plain, plain_log);
+  Train(validated, validated_log);
+  // Steps 2 and 3 ran after a validation: in fp32 they would end elsewhere.
+  EXPECT_TRUE(ReadFileBytes(tmp.path() / "validated" / "model.safetensors") ==
+              ReadFileBytes(tmp.path() / "plain" / "model.safetensors"))
+      << "the steps after a validation ran in another arithmetic";
+
+  // Step 1's logged metrics are fp32's evaluation of step 1's weights.
+  const std::string step1 = (tmp.path() / "validated" / "weights-000000001.safetensors").string();
+  auto eval_options = validated;
+  eval_options.precision = "fp32";
+  const std::string fp32 = FormatMetrics(EvaluateWeights(step1, eval_options, {1.0}).front().metrics);
+  eval_options.precision = "bf16";
+  const std::string bf16 = FormatMetrics(EvaluateWeights(step1, eval_options, {1.0}).front().metrics);
+  ASSERT_NE(fp32, bf16) << "bf16 and fp32 evaluations agree to the logged digits";
+  const size_t at = validated_log.str().find("validate step 1  cpu");
+  ASSERT_NE(at, std::string::npos) << validated_log.str();
+  const std::string line = validated_log.str().substr(at, validated_log.str().find('\n', at) - at);
+  EXPECT_NE(line.find(fp32), std::string::npos) << line << "\nfp32: " << fp32 << "\nbf16: " << bf16;
+}
+
 TEST(TrainerV2Test, DifficultyRampsLinearlyToOne) {
   TrainOptions o;
   EXPECT_EQ(TrainingDifficultyAt(o, 0), 1.0);
