@@ -61,25 +61,18 @@ for f in "${files[@]}"; do
   echo "scored step $step" >&2
 done
 
-# The table: every step scored with these options, best <2 % in bold.
-awk -F'\t' -v o="$signature" '
+# The table: every step scored with these options, in step order, best <2 % in bold.
+sort -t "$(printf '\t')" -k1,1n "$scores" | awk -F'\t' -v o="$signature" '
+  function field(line, name) { sub(".*" name ": ", "", line); sub(/ .*/, "", line); return line }
   $2 == o {
-    line = $3
-    within1 = line; sub(/.*<1%: /, "", within1); sub(/ .*/, "", within1)
-    within2 = line; sub(/.*<2%: /, "", within2); sub(/ .*/, "", within2)
-    absrel = line; sub(/.*AbsRel: /, "", absrel); sub(/ .*/, "", absrel)
-    step[$1] = $1; w1[$1] = within1; w2[$1] = within2; ar[$1] = absrel
-    if (best == "" || within2 + 0 > w2[best] + 0) best = $1
+    rows[++n] = $1; w1[n] = field($3, "<1%"); w2[n] = field($3, "<2%"); ar[n] = field($3, "AbsRel")
+    if (best == 0 || w2[n] + 0 > w2[best] + 0) best = n
   }
   END {
     print "| step | <1 % | <2 % | AbsRel |"
     print "|---|---|---|---|"
-    n = 0
-    for (s in step) steps[++n] = s + 0
-    for (i = 2; i <= n; i++) { v = steps[i]; for (j = i - 1; j >= 1 && steps[j] > v; j--) steps[j + 1] = steps[j]; steps[j + 1] = v }
     for (i = 1; i <= n; i++) {
-      s = steps[i]
-      if (s == best) printf "| %d | %s | **%s** | %s |\n", s, w1[s], w2[s], ar[s]
-      else printf "| %d | %s | %s | %s |\n", s, w1[s], w2[s], ar[s]
+      mark = (i == best) ? "**" : ""
+      printf "| %d | %s | %s%s%s | %s |\n", rows[i], w1[i], mark, w2[i], mark, ar[i]
     }
-  }' "$scores"
+  }'

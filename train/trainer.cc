@@ -179,19 +179,20 @@ class Logger {
 
 // ---------------------------------------------------------------- checkpoints
 
-std::string StepName(int64_t step) {
-  char buffer[32];  // nine digits: steps are capped at 999'999'999 by Check()
-  std::snprintf(buffer, sizeof buffer, "checkpoint-%09lld", static_cast<long long>(step));
+// "<prefix>-<step in nine digits>": steps are capped at 999'999'999 by Check().
+std::string StepName(const char* prefix, int64_t step) {
+  char buffer[48];
+  std::snprintf(buffer, sizeof buffer, "%s-%09lld", prefix, static_cast<long long>(step));
   return buffer;
 }
-fs::path WeightsPath(const fs::path& dir, int64_t step) { return dir / (StepName(step) + ".safetensors"); }
+fs::path WeightsPath(const fs::path& dir, int64_t step) {
+  return dir / (StepName("checkpoint", step) + ".safetensors");
+}
 fs::path OptimPath(const fs::path& dir, int64_t step) {
-  return dir / (StepName(step) + ".optim.safetensors");
+  return dir / (StepName("checkpoint", step) + ".optim.safetensors");
 }
 fs::path KeptWeightsPath(const fs::path& dir, int64_t step) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof buffer, "weights-%09lld.safetensors", static_cast<long long>(step));
-  return dir / buffer;
+  return dir / (StepName("weights", step) + ".safetensors");
 }
 
 // Steps of the complete checkpoints in `dir` (both files present), ascending.
