@@ -6,7 +6,6 @@
 
 #include <gtest/gtest.h>
 
-#include "model/host_allocator.h"
 #include "model/update_block.h"
 
 namespace dispmvs::model {
@@ -124,17 +123,6 @@ TEST(PrecisionTest, Bf16UpdateBlockFollowsTheFp32Block) {
     EXPECT_LT(r, 0.05) << name;
     EXPECT_GT(r, 1e-5) << name;
   }
-}
-
-TEST(HostAllocatorTest, GlibcTakesTheSettings) {
-#if defined(__GLIBC__)
-  EXPECT_TRUE(KeepFreedTensorMemory());
-  // Tensors allocated and freed afterwards behave as before.
-  const torch::Tensor big = torch::ones({4, 1024, 1024});
-  EXPECT_EQ(big.sum().item<float>(), 4.0f * 1024 * 1024);
-#else
-  EXPECT_FALSE(KeepFreedTensorMemory());
-#endif
 }
 
 }  // namespace

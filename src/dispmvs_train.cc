@@ -84,6 +84,10 @@ options (default):
   --init_weights FILE         start from these weights (e.g. models/dispmvs_small.safetensors,
                               to fine-tune at a larger size) instead of a random initialisation;
                               the file must fit --config (none)
+  --low_memory 0|1            CPU training: return freed maps above 32 MiB to the system after
+                              each use (glibc's default) instead of keeping every freed block for
+                              the next step: about 30 % less resident memory for about 1.4x the
+                              step time (0)
   --seed S                    run seed (0)
   --device cpu|cuda|cuda:I    (cpu)
   --threads T                 intra-op threads, 0 = one per core (0)
@@ -123,6 +127,13 @@ uint64_t ParseUnsigned(const std::string& flag, const std::string& value) {
     throw std::invalid_argument(flag + " expects a non-negative integer, got '" + value + "'");
   }
   return v;
+}
+
+bool ParseSwitch(const std::string& flag, const std::string& value) {
+  if (value != "0" && value != "1") {
+    throw std::invalid_argument(flag + " expects 0 or 1, got '" + value + "'");
+  }
+  return value == "1";
 }
 
 double ParseDouble(const std::string& flag, const std::string& value) {
@@ -208,6 +219,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--widenings") cl.widenings = ParseWidenings(flag, value);
     else if (flag == "--texture_dir") o.texture_dir = value;
     else if (flag == "--photo_probability") o.photo_probability = ParseDouble(flag, value);
+    else if (flag == "--low_memory") o.low_memory = ParseSwitch(flag, value);
     else if (flag == "--seed") o.seed = ParseUnsigned(flag, value);
     else if (flag == "--device") o.device = value;
     else if (flag == "--threads") o.threads = ParseInt(flag, value);

@@ -812,10 +812,18 @@ void Train(const TrainOptions& options, std::ostream& console) {
   options.Check(/*for_training=*/true);
   const torch::Device device = model::ParseUsableDevice(options.device);
   SetThreads(options.threads);
-  if (device.is_cpu()) model::KeepFreedTensorMemory();
   const fs::path dir = options.checkpoint_dir;
   fs::create_directories(dir);
   Logger log(console, dir / "train.log");
+  if (device.is_cpu()) {
+    if (options.low_memory) {
+      model::KeepFreedTensorMemory();
+      log.Line("CPU memory: freed blocks above 32 MiB returned to the system (--low_memory 1)");
+    } else {
+      model::KeepAllFreedTensorMemory();
+      log.Line("CPU memory: every freed block kept for the next step (--low_memory 1 saves memory)");
+    }
+  }
 
   const ModelConfig config = ModelConfig::ByName(options.config);
   torch::manual_seed(options.seed);  // the initial weights
