@@ -86,8 +86,8 @@ options (default):
                               the file must fit --config (none)
   --low_memory 0|1            CPU training: return freed maps above 32 MiB to the system after
                               each use (glibc's default) instead of keeping every freed block for
-                              the next step: about 30 % less resident memory for about 1.4x the
-                              step time (0)
+                              the next step: a third less resident memory for twice the step
+                              time (docs/benchmarks.md) (0)
   --seed S                    run seed (0)
   --device cpu|cuda|cuda:I    (cpu)
   --threads T                 intra-op threads, 0 = one per core (0)

@@ -119,9 +119,10 @@ struct TrainOptions {
   // CPU training: return freed blocks above 32 MiB to the system after each
   // use, as glibc does by default, instead of keeping every freed block for
   // the next step (model/host_allocator.h). Less resident memory (5.2 against
-  // 7.4 GB at 640x480, batch 2, 5 sources) for slower steps (about 1.4x:
-  // the kernel zero-fills those blocks again on every use). Not a run
-  // setting: it changes no step's arithmetic.
+  // 7.6 GB at 640x480, batch 2, 5 sources) for twice the step time (the
+  // kernel maps and zero-fills those blocks again on every use;
+  // bench/train_step_memory.sh). Not a run setting: it changes no step's
+  // arithmetic.
   bool low_memory = false;
   uint64_t seed = 0;
   std::string device = "cpu";  // "cpu", "cuda" or "cuda:<i>"
