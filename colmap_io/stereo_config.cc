@@ -357,6 +357,30 @@ std::vector<StereoProblem> ResolvePatchMatchConfig(const std::vector<PatchMatchE
   return problems;
 }
 
+std::vector<StereoProblem> ResolvePatchMatchConfigWithPoseFallback(
+    const std::vector<PatchMatchEntry>& entries, const SparseModel& model,
+    const ViewSelectionOptions& view_selection, const std::string& config_name,
+    const SampleDepthsFunction& sample_depths, std::set<image_t>* pose_selected) {
+  std::vector<StereoProblem> problems =
+      ResolvePatchMatchConfig(entries, model, view_selection, config_name);
+  // ResolvePatchMatchConfig gives one problem per entry, in order.
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    StereoProblem& problem = problems[i];
+    if (entries[i].sources.kind != SourceSpec::Kind::kAuto ||
+        SharesSparsePoints(model, problem.reference_image_id)) {
+      continue;
+    }
+    if (pose_selected != nullptr) pose_selected->insert(problem.reference_image_id);
+    const auto depths = sample_depths(problem.reference_image_id);
+    problem.source_image_ids =
+        depths ? SelectSourceViewsByPose(model, problem.reference_image_id,
+                                         entries[i].sources.max_num_sources, depths->first,
+                                         depths->second, view_selection)
+               : std::vector<image_t>{};
+  }
+  return problems;
+}
+
 std::vector<PatchMatchEntry> AutoPatchMatchConfig(const SparseModel& model,
                                                   std::size_t max_num_sources) {
   if (max_num_sources == 0) {

@@ -17,7 +17,10 @@
 
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <istream>
+#include <optional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -111,6 +114,22 @@ std::vector<StereoProblem> ResolvePatchMatchConfig(const std::vector<PatchMatchE
                                                    const SparseModel& model,
                                                    const ViewSelectionOptions& view_selection,
                                                    const std::string& config_name);
+
+// The depths the pose-based fallback below samples for a reference
+// (e.g. PoseSampleDepths::For); nullopt when nothing says how far the scene is.
+using SampleDepthsFunction =
+    std::function<std::optional<std::pair<double, double>>(image_t reference_image_id)>;
+
+// ResolvePatchMatchConfig, then the fallback of dispmvs_colmap's plan: an
+// `__auto__` entry whose reference shares no sparse point with another image
+// (COLMAP's rule gives it no source) takes the first max_num_sources images
+// of RankSourceViewsByPose instead, sampling sample_depths(reference); with
+// no depths (every camera centre equal) it keeps no source. Those references
+// are added to `pose_selected` when it is given.
+std::vector<StereoProblem> ResolvePatchMatchConfigWithPoseFallback(
+    const std::vector<PatchMatchEntry>& entries, const SparseModel& model,
+    const ViewSelectionOptions& view_selection, const std::string& config_name,
+    const SampleDepthsFunction& sample_depths, std::set<image_t>* pose_selected = nullptr);
 
 // What to use when a workspace has no patch-match.cfg: every image of the
 // model, by ascending image id, with "__auto__, max_num_sources" (the same

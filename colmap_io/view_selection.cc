@@ -267,4 +267,21 @@ std::optional<std::pair<double, double>> GuessSampleDepthsFromPoses(const Sparse
   return std::make_pair(2.0 * baseline, 100.0 * baseline);
 }
 
+PoseSampleDepths::PoseSampleDepths(const SparseModel& model,
+                                   const std::map<image_t, DepthRange>& ranges)
+    : model_(model), ranges_(ranges), fallback_(FallbackDepthRange(ranges)) {}
+
+std::optional<std::pair<double, double>> PoseSampleDepths::For(image_t reference_image_id) {
+  const auto own = ranges_.find(reference_image_id);
+  if (own != ranges_.end() && own->second.valid) {
+    return std::make_pair(own->second.d_min, own->second.d_max);
+  }
+  if (fallback_.valid) return std::make_pair(fallback_.d_min, fallback_.d_max);
+  if (!guess_tried_) {
+    guessed_ = GuessSampleDepthsFromPoses(model_);
+    guess_tried_ = true;
+  }
+  return guessed_;
+}
+
 }  // namespace dispmvs::colmap_io

@@ -19,10 +19,12 @@
 // triangulation angles. See RankSourceViewsByPose.
 
 #include <cstddef>
+#include <map>
 #include <optional>
 #include <utility>
 #include <vector>
 
+#include "colmap_io/depth_range.h"
 #include "colmap_io/sparse_model.h"
 
 namespace dispmvs::colmap_io {
@@ -121,5 +123,26 @@ std::vector<image_t> SelectSourceViewsByPose(const SparseModel& model,
 // for fewer than two images or when the typical baseline is 0 (all
 // centres equal: nothing can be triangulated).
 std::optional<std::pair<double, double>> GuessSampleDepthsFromPoses(const SparseModel& model);
+
+// The depths the pose-based selection samples for a reference when the user
+// gives none: the reference's own valid range in `ranges` (its sparse
+// points), else the union of the valid ones (FallbackDepthRange), else
+// GuessSampleDepthsFromPoses, computed once on first need and kept (it is
+// quadratic in the number of images). Nullopt when even the guess fails.
+// Keeps references to `model` and `ranges`: they must outlive it.
+class PoseSampleDepths {
+ public:
+  PoseSampleDepths(const SparseModel& model, const std::map<image_t, DepthRange>& ranges);
+  std::optional<std::pair<double, double>> For(image_t reference_image_id);
+  // The guess, when For needed it and it succeeded.
+  const std::optional<std::pair<double, double>>& guessed() const { return guessed_; }
+
+ private:
+  const SparseModel& model_;
+  const std::map<image_t, DepthRange>& ranges_;
+  DepthRange fallback_;
+  bool guess_tried_ = false;
+  std::optional<std::pair<double, double>> guessed_;
+};
 
 }  // namespace dispmvs::colmap_io

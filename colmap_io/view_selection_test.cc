@@ -1,7 +1,9 @@
 #include "colmap_io/view_selection.h"
 
 #include <cmath>
+#include <map>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -322,6 +324,30 @@ TEST(PoseViewSelectionTest, GuessedDepthsFollowTheTypicalBaseline) {
   ASSERT_TRUE(depths.has_value());
   EXPECT_NEAR(depths->first, 4.0, 1e-12);
   EXPECT_NEAR(depths->second, 200.0, 1e-12);
+}
+
+// Own range first, then the union of the others', then the guess from the
+// baselines (computed once).
+TEST(PoseViewSelectionTest, SampleDepthsPreferTheImagesOwnRange) {
+  RowScene row;
+  const image_t a = row.AddForward(0, "a.png");
+  const image_t b = row.AddForward(1, "b.png");
+  const image_t c = row.AddForward(3, "c.png");
+  std::map<image_t, DepthRange> ranges;
+  ranges[a] = {2.0, 5.0, 10, true};
+  ranges[b] = {0.0, 0.0, 0, false};
+  ranges[c] = {3.0, 9.0, 4, true};
+  PoseSampleDepths with_ranges(row.builder.model(), ranges);
+  EXPECT_EQ(with_ranges.For(a), std::make_pair(2.0, 5.0));
+  EXPECT_EQ(with_ranges.For(b), std::make_pair(2.0, 9.0));  // the union
+  EXPECT_FALSE(with_ranges.guessed().has_value());
+
+  const std::map<image_t, DepthRange> none{{a, {}}, {b, {}}, {c, {}}};
+  PoseSampleDepths without(row.builder.model(), none);
+  // Nearest-centre distances 1, 1, 2: the median is 1.
+  EXPECT_EQ(without.For(b), std::make_pair(2.0, 100.0));
+  ASSERT_TRUE(without.guessed().has_value());
+  EXPECT_EQ(*without.guessed(), std::make_pair(2.0, 100.0));
 }
 
 TEST(PoseViewSelectionTest, BadArgumentsThrow) {

@@ -45,26 +45,6 @@ void CheckPinholeCameras(const SparseModel& model, const Workspace& workspace) {
   }
 }
 
-// What the pose-based source selection of `reference` samples: the image's
-// hint before widening (the widening tests the network, not the selection),
-// else depths guessed from the camera layout.
-std::optional<std::pair<double, double>> SampleDepthsFor(DensePlan* plan, image_t reference) {
-  if (plan->user_depth_range) {
-    return std::make_pair(plan->user_depth_range->d_min, plan->user_depth_range->d_max);
-  }
-  const auto own = plan->depth_ranges.find(reference);
-  if (own != plan->depth_ranges.end() && own->second.valid) {
-    return std::make_pair(own->second.d_min, own->second.d_max);
-  }
-  if (plan->fallback_depth_range.valid) {
-    return std::make_pair(plan->fallback_depth_range.d_min, plan->fallback_depth_range.d_max);
-  }
-  if (!plan->guessed_sample_depths) {
-    plan->guessed_sample_depths = GuessSampleDepthsFromPoses(plan->model);
-  }
-  return plan->guessed_sample_depths;
-}
-
 // The stereo problems: from patch-match.cfg, or `__auto__` for every image.
 // Applies --max_num_src_images to `__auto__` entries. An `__auto__` reference
 // sharing no sparse point with another image would get no source from
@@ -92,25 +72,19 @@ void PlanProblems(const Workspace& workspace, const PlanOptions& options, DenseP
       entry.sources.max_num_sources = std::min(entry.sources.max_num_sources, max_sources);
     }
   }
-  const ViewSelectionOptions view_selection = options.ViewSelection();
-  plan->problems =
-      ResolvePatchMatchConfig(entries, plan->model, view_selection, config_path.string());
-  // ResolvePatchMatchConfig gives one problem per entry, in order.
-  for (std::size_t i = 0; i < entries.size(); ++i) {
-    StereoProblem& problem = plan->problems[i];
-    if (entries[i].sources.kind != SourceSpec::Kind::kAuto ||
-        SharesSparsePoints(plan->model, problem.reference_image_id)) {
-      continue;
+  // The pose-based selection samples the image's hint before widening (the
+  // widening tests the network, not the selection).
+  PoseSampleDepths pose_sample_depths(plan->model, plan->depth_ranges);
+  const auto sample_depths = [&](image_t reference) -> std::optional<std::pair<double, double>> {
+    if (plan->user_depth_range) {
+      return std::make_pair(plan->user_depth_range->d_min, plan->user_depth_range->d_max);
     }
-    plan->pose_selected_references.insert(problem.reference_image_id);
-    const auto depths = SampleDepthsFor(plan, problem.reference_image_id);
-    // No depths (every centre equal): nothing triangulates, no sources.
-    problem.source_image_ids =
-        depths ? SelectSourceViewsByPose(plan->model, problem.reference_image_id,
-                                         entries[i].sources.max_num_sources, depths->first,
-                                         depths->second, view_selection)
-               : std::vector<image_t>{};
-  }
+    return pose_sample_depths.For(reference);
+  };
+  plan->problems = ResolvePatchMatchConfigWithPoseFallback(
+      entries, plan->model, options.ViewSelection(), config_path.string(), sample_depths,
+      &plan->pose_selected_references);
+  plan->guessed_sample_depths = pose_sample_depths.guessed();
 }
 
 // Images missing on disk are reported once and dropped from every source

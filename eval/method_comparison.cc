@@ -148,9 +148,14 @@ std::map<image_t, std::vector<image_t>> SourcesOf(const Workspace& workspace,
   const std::vector<PatchMatchEntry> entries = fs::is_regular_file(config)
                                                    ? ReadPatchMatchConfig(config)
                                                    : AutoPatchMatchConfig(model, 4);
+  // The sources dispmvs_colmap chooses with its defaults, the fallback to the
+  // camera poses included (a workspace without sparse points).
+  const std::map<image_t, DepthRange> ranges = ComputeDepthRanges(model);
+  PoseSampleDepths sample_depths(model, ranges);
   std::map<image_t, std::vector<image_t>> sources;
-  for (const StereoProblem& problem :
-       ResolvePatchMatchConfig(entries, model, ViewSelectionOptions(), config.string())) {
+  for (const StereoProblem& problem : ResolvePatchMatchConfigWithPoseFallback(
+           entries, model, ViewSelectionOptions(), config.string(),
+           [&](image_t reference) { return sample_depths.For(reference); })) {
     sources[problem.reference_image_id] = problem.source_image_ids;
   }
   return sources;

@@ -14,6 +14,7 @@
 
 #include "colmap_io/dense_array.h"
 #include "colmap_io/ply.h"
+#include "colmap_io/sparse_model_io.h"
 #include "colmap_io/workspace.h"
 #include "eval/comparison_report.h"
 #include "examples/example_workspace.h"
@@ -173,6 +174,34 @@ TEST_F(MethodComparisonTest, CloudsAgainstEachOther) {
   EXPECT_DOUBLE_EQ(m.precision, 0.5);
   EXPECT_DOUBLE_EQ(m.recall, 1.0);
   EXPECT_NEAR(m.fscore, 2.0 / 3.0, 1e-12);
+}
+
+// Without sparse points COLMAP's `__auto__` rule finds no source; the
+// sources then come from the camera poses, as in dispmvs_colmap's plan, so
+// the consistency figures are still there: four sources for the inner
+// views of the example's arc, three for its two ends (what
+// SelectSourceViewsByPose keeps there, as dispmvs_colmap's plan does).
+TEST_F(MethodComparisonTest, SourcesComeFromThePosesWithoutSparsePoints) {
+  MethodComparisonOptions options;
+  options.type_a = "exact";
+  options.type_b = "perturbed";
+  const MethodComparison with_points = CompareMethods(root_, options);
+  const colmap_io::Workspace workspace(root_);
+  colmap_io::SparseModel model = workspace.ReadModel();
+  model.points3D.clear();
+  for (auto& [image_id, image] : model.images) image.points2D.clear();
+  colmap_io::WriteSparseModelBinary(model, workspace.SparseDir());
+  ASSERT_TRUE(workspace.ReadModel().points3D.empty());
+
+  const MethodComparison without = CompareMethods(root_, options);
+  EXPECT_EQ(without.pooled.within_2, with_points.pooled.within_2);
+  EXPECT_EQ(without.pooled.checked_a, without.pooled.valid_a);
+  EXPECT_GT(Fractions(without.pooled).consistency_a, 0.85);
+  EXPECT_LT(Fractions(without.pooled).consistency_b, Fractions(without.pooled).consistency_a - 0.2);
+  for (const ViewComparison& view : without.views) {
+    const bool end = view.name == "view_00.png" || view.name == "view_06.png";
+    EXPECT_EQ(view.sources_a, end ? 3 : 4) << view.name;
+  }
 }
 
 TEST_F(MethodComparisonTest, RefusesBadRequests) {

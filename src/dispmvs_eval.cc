@@ -43,7 +43,8 @@ agreement, the shared pixels within 1 / 2 / 5 % of each other
 (2 |a - b| / (a + b)); and each method's own multi-view consistency, the
 share of its valid pixels that at least one source view's map of the same
 method agrees with (reprojection within 1 px and depth within 1 %, the test
-fusion applies; sources from patch-match.cfg, else __auto__, 4). With
+fusion applies; sources from patch-match.cfg, else __auto__, 4, from the
+camera poses where no sparse point is shared, as dispmvs_colmap does). With
 --compare_ply, the clouds too: mean distance A -> B and B -> A, and the
 shares of each within tau of the other, tau and the cut-off as fractions of
 B's bounding-box diagonal (--tau_rel, --cutoff_rel).
