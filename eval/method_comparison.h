@@ -15,11 +15,11 @@
 //                within max_relative_depth_error), the test fusion applies
 // Sources are patch-match.cfg's (or `__auto__, 4` without it), resolved with
 // the sparse model as COLMAP does, and, as dispmvs_colmap does, from the
-// camera poses for an `__auto__` reference that shares no sparse point
-// (a workspace without sparse points still gets consistency figures). Maps of different sizes (max_image_size)
-// are compared at the smaller size, the larger sampled at the nearest pixel
-// in COLMAP's dense convention (eval/depth_metrics.h); the sizes must be a
-// clean scale of one another.
+// camera poses for an `__auto__` reference that shares no sparse point (a
+// workspace without sparse points still gets consistency figures). Maps of
+// different sizes (max_image_size) are compared at the smaller size, the
+// larger sampled at the nearest pixel in COLMAP's dense convention
+// (eval/depth_metrics.h); the sizes must be a clean scale of one another.
 //
 // Point clouds A and B (e.g. our fused.ply and stereo_fusion's) are compared
 // as eval/cloud_metrics.h compares a reconstruction with ground truth, B
