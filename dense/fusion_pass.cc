@@ -10,9 +10,11 @@
 
 #include <opencv2/core.hpp>
 
+#include "colmap_io/atomic_file.h"
 #include "colmap_io/error.h"
 #include "colmap_io/image_io.h"
 #include "colmap_io/stereo_config.h"
+#include "dense/geometric_pass.h"
 #include "dense/pass_summary.h"
 #include "dense/workspace_maps.h"
 #include "fusion/fused_cloud_writer.h"
@@ -39,6 +41,22 @@ std::vector<image_t> FusionImageOrder(const Workspace& workspace, const DensePla
     for (const StereoProblem& problem : plan.problems) image_ids.push_back(problem.reference_image_id);
   }
   return image_ids;
+}
+
+std::optional<ViewClaim> ClaimGeometricAndFusion(const Workspace& workspace,
+                                                  const DensePlan& plan, const fs::path& ply_path,
+                                                  const std::vector<fs::path>& other_outputs,
+                                                  std::ostream& log, long* holder_pid) {
+  std::optional<ViewClaim> claim = ViewClaim::TryClaim(FusionClaimPath(workspace), holder_pid);
+  if (!claim) return claim;
+  int removed = RemoveGeometricLeftovers(workspace, plan) +
+                fusion::FusedCloudWriter::RemoveLeftovers(ply_path);
+  for (const fs::path& output : other_outputs) removed += RemoveLeftoverTemporaries(output);
+  if (removed > 0) {
+    log << "fuse: removed " << removed
+        << " temporary file(s) that an interrupted run had left beside its outputs\n";
+  }
+  return claim;
 }
 
 FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,

@@ -6,11 +6,13 @@
 
 #include <cstddef>
 #include <filesystem>
-#include <vector>
+#include <optional>
 #include <ostream>
+#include <vector>
 
 #include "colmap_io/workspace.h"
 #include "dense/plan.h"
+#include "dense/view_claim.h"
 #include "fusion/geometric_filter.h"
 
 namespace dispmvs::dense {
@@ -31,6 +33,20 @@ inline constexpr std::size_t kDefaultFusionCacheBytes = std::size_t{1024} * 1024
 // or names an image that is not in the model (checked before any pass runs).
 std::vector<colmap_io::image_t> FusionImageOrder(const colmap_io::Workspace& workspace,
                                                  const DensePlan& plan);
+
+// Takes the workspace's fusion claim (FusionClaimPath) for the geometric
+// pass and fusion that follow, then removes what killed runs left beside
+// their outputs: the geometric maps' temporaries (RemoveGeometricLeftovers),
+// those of `ply_path` (FusedCloudWriter::RemoveLeftovers) and those of
+// `other_outputs` (files the run writes under the claim, e.g. its report),
+// with a line in `log` when there were any. nullopt, with nothing removed,
+// when another process holds the claim; `holder_pid` (optional) then
+// receives its pid, 0 if unknown. Throws IoError when the lock or a
+// leftover cannot be handled.
+std::optional<ViewClaim> ClaimGeometricAndFusion(
+    const colmap_io::Workspace& workspace, const DensePlan& plan,
+    const std::filesystem::path& ply_path, const std::vector<std::filesystem::path>& other_outputs,
+    std::ostream& log, long* holder_pid = nullptr);
 
 // Writes `ply_path` and `ply_path`.vis (each through a temporary name). An
 // image whose maps cannot be read is left out with a line in `log`; a

@@ -1,10 +1,13 @@
 #include "dense/geometric_pass.h"
 
 #include <cstddef>
+#include <algorithm>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
+#include "colmap_io/atomic_file.h"
 #include "colmap_io/dense_array.h"
 #include "dense/workspace_maps.h"
 
@@ -75,6 +78,29 @@ PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
   log << std::flush;
   summary.seconds = SecondsSince(start);
   return summary;
+}
+
+int RemoveGeometricLeftovers(const Workspace& workspace, const DensePlan& plan) {
+  // Image names may hold folders, so the maps of one type can lie in several
+  // folders: each is listed once, and in the common case none has any.
+  std::map<fs::path, std::vector<std::string>> names_with_temporaries;
+  int removed = 0;
+  for (const auto& [image_id, image] : plan.model.images) {
+    const MapPaths paths = PathsOf(workspace, image.name, kGeometricType);
+    for (const fs::path& path : {paths.depth, paths.normal, paths.confidence}) {
+      auto folder = names_with_temporaries.find(path.parent_path());
+      if (folder == names_with_temporaries.end()) {
+        folder = names_with_temporaries
+                     .emplace(path.parent_path(), NamesWithTemporaries(path.parent_path()))
+                     .first;
+      }
+      if (std::binary_search(folder->second.begin(), folder->second.end(),
+                             path.filename().string())) {
+        removed += RemoveLeftoverTemporaries(path);
+      }
+    }
+  }
+  return removed;
 }
 
 }  // namespace dispmvs::dense

@@ -23,4 +23,13 @@ namespace dispmvs::dense {
 PassSummary RunGeometricPass(const colmap_io::Workspace& workspace, const DensePlan& plan,
                              const fusion::GeometricFilterOptions& options, std::ostream& log);
 
+// Removes the temporaries (NAME.tmp-*, colmap_io/atomic_file.h) that a
+// killed run left beside the geometric maps (depth, normal, confidence) of
+// every image of the model, listing each map folder once. Only for a caller
+// holding the fusion claim (FusionClaimPath, dense/view_claim.h): every
+// writer of these maps holds it, so a temporary found then is a dead
+// process's. Returns how many were removed; throws IoError when a folder
+// cannot be listed or a file removed.
+int RemoveGeometricLeftovers(const colmap_io::Workspace& workspace, const DensePlan& plan);
+
 }  // namespace dispmvs::dense

@@ -19,6 +19,10 @@ fs::path ClaimPath(const colmap_io::Workspace& workspace, const std::string& nam
   return workspace.StereoDir() / "dispmvs_claims" / (name + ".lock");
 }
 
+fs::path FusionClaimPath(const colmap_io::Workspace& workspace) {
+  return workspace.StereoDir() / "dispmvs_fusion.lock";
+}
+
 namespace {
 
 long ReadHolderPid(int fd) {

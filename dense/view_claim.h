@@ -1,4 +1,6 @@
 #pragma once
+// Claims on a workspace's outputs: per view for the photometric pass, and
+// one for the geometric pass and fusion together (FusionClaimPath).
 // Per-view claims of the photometric pass, so that processes sharing a
 // workspace never compute the same view at once: shards started together
 // (--shard K/N), or the same shard started twice by mistake. A claim is an
@@ -18,6 +20,14 @@ namespace dispmvs::dense {
 
 // WS/stereo/dispmvs_claims/NAME.lock (NAME may hold folders, as image names do).
 std::filesystem::path ClaimPath(const colmap_io::Workspace& workspace, const std::string& name);
+
+// WS/stereo/dispmvs_fusion.lock: the claim of the geometric pass and fusion,
+// which write the workspace's shared outputs (every geometric map, one
+// fused.ply), so that two such runs never interleave their writes and the
+// run holding it knows that any temporaries beside those outputs are a
+// killed run's. Outside dispmvs_claims/, so that no image name can collide
+// with it.
+std::filesystem::path FusionClaimPath(const colmap_io::Workspace& workspace);
 
 class ViewClaim {
  public:

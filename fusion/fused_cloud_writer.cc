@@ -41,6 +41,16 @@ FusedCloudWriter::FusedCloudWriter(const fs::path& ply_path)
   if (!vis_body_) throw colmap_io::IoError(vis_body_path_.string(), "cannot open for writing");
 }
 
+int FusedCloudWriter::RemoveLeftovers(const fs::path& ply_path) {
+  // The body files are NAME.points.tmp-PID beside NAME and NAME.vis, so the
+  // same removal of "X.tmp-*" covers them with X = NAME.points, NAME.vis.points.
+  int removed = 0;
+  for (const char* suffix : {"", ".vis", ".points", ".vis.points"}) {
+    removed += colmap_io::RemoveLeftoverTemporaries(ply_path.string() + suffix);
+  }
+  return removed;
+}
+
 FusedCloudWriter::~FusedCloudWriter() {
   ply_body_.close();
   vis_body_.close();

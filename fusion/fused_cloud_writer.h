@@ -31,6 +31,13 @@ class FusedCloudWriter {
   // Writes both files; throws colmap_io::IoError naming the file that failed.
   void Finish();
 
+  // Removes what killed writers of `ply_path` left: the body files and the
+  // temporaries of both final files (colmap_io/atomic_file.h). Only for a
+  // caller that knows no live process writes `ply_path` (dispmvs_colmap
+  // holds the workspace's fusion claim, dense/view_claim.h). Returns how many
+  // files were removed; throws colmap_io::IoError when one cannot be.
+  static int RemoveLeftovers(const std::filesystem::path& ply_path);
+
  private:
   void Flush();
 

@@ -65,9 +65,12 @@ interruption; --overwrite recomputes); files are written under a temporary
 name and renamed, so an interrupted run leaves no half-written file. Several
 processes may share a workspace (--shard K/N, run at once): each view is
 claimed with a lock in WS/stereo/dispmvs_claims/ while it is computed, so a
-view another process is computing is skipped and said so. Each computed
-view's time goes to WS/stereo/dispmvs_records/NAME.txt, which the run report
-(WS/dispmvs_report.html) shows. examples/slurm/ runs the shards on a Slurm
+view another process is computing is skipped and said so. The geometric pass
+and fusion write shared outputs, so one process at a time runs them (a lock
+on WS/stereo/dispmvs_fusion.lock; another stops with an error), and it first
+removes the temporary files that killed runs left beside those outputs. Each
+computed view's time goes to WS/stereo/dispmvs_records/NAME.txt, which the
+run report (WS/dispmvs_report.html) shows. examples/slurm/ runs the shards on a Slurm
 cluster (a job array, then a dependent fusion job).
 
 Depth range: each image's range comes from the sparse points it sees (COLMAP's
@@ -409,7 +412,17 @@ int Run(const Options& options) {
                            dense::RunPhotometricPass(workspace, plan, options.photometric, std::cout));
   }
   std::optional<dense::FusionSummary> fusion_summary;
+  const fs::path report_path = workspace.root() / "dispmvs_report.html";
+  // The geometric maps and the cloud are the workspace's shared outputs: one
+  // process at a time writes them (dense/view_claim.h), and it clears what
+  // killed runs left beside them.
+  std::optional<dense::ViewClaim> fusion_claim;
+  long fusion_holder = 0;
   if (options.mode == "full" || options.mode == "fuse") {
+    fusion_claim = dense::ClaimGeometricAndFusion(workspace, plan, ply, {report_path}, std::cout,
+                                                  &fusion_holder);
+  }
+  if (fusion_claim) {
     summaries.emplace_back("geometric",
                            dense::RunGeometricPass(workspace, plan, options.filter, std::cout));
     fusion_summary = dense::RunFusion(workspace, plan, options.filter, ply, std::cout,
@@ -436,11 +449,18 @@ int Run(const Options& options) {
       PrintEmptyCloudWarning(options, plan, *fusion_summary, ply);
     }
   }
+  if ((options.mode == "full" || options.mode == "fuse") && !fusion_claim) {
+    std::cout << "error: the geometric pass and fusion were not run: another process";
+    if (fusion_holder > 0) std::cout << " (pid " << fusion_holder << ")";
+    std::cout << " is running them on this workspace (its lock: "
+              << dense::FusionClaimPath(workspace).string()
+              << "); once it ends, rerun with --mode fuse\n";
+    failed = true;
+  }
   if (fusion_summary && !options.no_report) {
     eval::HtmlReportOptions report;
     report.ply_path = ply.string();
     report.settings = options.command_line;
-    const fs::path report_path = workspace.root() / "dispmvs_report.html";
     // The report only shows what the run wrote: failing to write it (a full
     // disk) is said, but does not fail the run.
     try {

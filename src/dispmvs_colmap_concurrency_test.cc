@@ -1,7 +1,8 @@
 // Several dispmvs_colmap processes on one workspace at once: shards run
 // together, one of them started twice by mistake, give byte-identical
 // results to a single process, with every view computed exactly once; and a
-// view another process holds is skipped with a message that says so.
+// view another process holds is skipped with a message that says so; the
+// geometric pass and fusion run in one process at a time.
 
 #include <unistd.h>
 
@@ -16,6 +17,7 @@
 #include <gtest/gtest.h>
 
 #include "colmap_io/workspace.h"
+#include "dense/test_workspace.h"
 #include "dense/view_claim.h"
 #include "examples/example_workspace.h"
 #include "tests/support/temp_dir.h"
@@ -125,6 +127,31 @@ TEST(ConcurrencyTest, AViewAnotherProcessHoldsIsSkippedAndSaidSo) {
   ASSERT_EQ(RunToEnd(Args(ws, "photometric"), dir.path() / "second.log", &output), 0) << output;
   EXPECT_EQ(ViewsDone(output), 1) << output;
   EXPECT_TRUE(fs::exists(ws / "stereo" / "depth_maps" / "view_03.png.dispmvs.photometric.bin"));
+}
+
+TEST(ConcurrencyTest, FusionAnotherProcessHoldsIsNotRunAndTheExitSaysSo) {
+  TempDir dir;
+  const fs::path ws = dir.path() / "ws";
+  dense::testing::WriteExampleWithExactMaps(ws);
+  const std::vector<std::string> fuse = {"--workspace_path", ws.string(), "--mode", "fuse"};
+  // This test plays the other process: it holds the fusion claim.
+  std::optional<dense::ViewClaim> claim =
+      dense::ViewClaim::TryClaim(dense::FusionClaimPath(colmap_io::Workspace(ws)));
+  ASSERT_TRUE(claim.has_value());
+
+  std::string output;
+  EXPECT_EQ(RunToEnd(fuse, dir.path() / "first.log", &output), 1) << output;
+  EXPECT_NE(output.find("error: the geometric pass and fusion were not run: another process (pid " +
+                        std::to_string(::getpid()) + ") is running them on this workspace"),
+            std::string::npos)
+      << output;
+  EXPECT_EQ(output.find("summary: geometric"), std::string::npos) << output;
+  EXPECT_FALSE(fs::exists(ws / "fused.ply"));
+  EXPECT_FALSE(fs::exists(ws / "stereo" / "depth_maps" / "view_03.png.dispmvs.geometric.bin"));
+
+  claim.reset();  // the other process ended
+  ASSERT_EQ(RunToEnd(fuse, dir.path() / "second.log", &output), 0) << output;
+  EXPECT_TRUE(fs::exists(ws / "fused.ply"));
 }
 
 }  // namespace

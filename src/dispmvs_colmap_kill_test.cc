@@ -2,7 +2,7 @@
 // (photometric, geometric, fusion, export), many times: after every kill no
 // file under a final name is partial (each one parses completely), and once
 // the command has been rerun to the end, every output is byte-identical to
-// that of an uninterrupted run.
+// that of an uninterrupted run, and no temporary file is left.
 //
 // The kill moments come from the program's own progress lines: for each line
 // a pass prints (one per view), a kill at a random delay after it, drawn
@@ -74,13 +74,16 @@ void ExpectNoPartialFile(const fs::path& root, const std::string& when) {
   }
 }
 
-// Temporary files (NAME.tmp-*) of the network's maps under `root`: a rerun
-// that recomputes a killed view removes its writer's leftovers.
-std::vector<std::string> PhotometricTemporaries(const fs::path& root) {
+// Temporary files (NAME.tmp-*) under `root` whose name holds `part`: a rerun
+// that recomputes a killed view removes its writer's leftovers, and one that
+// fuses removes those of the geometric maps and of the cloud.
+std::vector<std::string> Temporaries(const fs::path& root, const std::string& part = "") {
   std::vector<std::string> found;
-  for (const auto& entry : fs::recursive_directory_iterator(root / "stereo")) {
+  for (const auto& entry : fs::recursive_directory_iterator(root)) {
     const std::string name = entry.path().filename().string();
-    if (name.find("dispmvs.photometric.bin.tmp-") != std::string::npos) found.push_back(name);
+    if (name.find(".tmp-") != std::string::npos && name.find(part) != std::string::npos) {
+      found.push_back(name);
+    }
   }
   return found;
 }
@@ -176,7 +179,7 @@ TEST_F(KillTest, PhotometricPassResumesToTheSameBytes) {
     }
     Finish(args(killed));
     EXPECT_EQ(FinalFiles(killed), expected) << "after kills at '" << triggers[k] << "'";
-    EXPECT_EQ(PhotometricTemporaries(killed), std::vector<std::string>{})
+    EXPECT_EQ(Temporaries(killed, "dispmvs.photometric.bin"), std::vector<std::string>{})
         << "after kills at '" << triggers[k] << "'";
   }
   ExpectMostKillsLanded();
@@ -211,6 +214,8 @@ TEST_F(KillTest, GeometricPassAndFusionResumeToTheSameBytes) {
     KillAfter(args(killed), trigger, k == 0 ? times[0] : times[k] - times[k - 1], killed);
     Finish(args(killed));
     EXPECT_EQ(FinalFiles(killed), expected) << "after a kill at '" << trigger << "'";
+    EXPECT_EQ(Temporaries(killed), std::vector<std::string>{})
+        << "after a kill at '" << trigger << "'";
   }
   ExpectMostKillsLanded();
 }

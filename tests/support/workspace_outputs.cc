@@ -13,6 +13,7 @@ std::map<std::string, std::string> FinalOutputs(const fs::path& root) {
     if (entry.path().filename().string().find(".tmp-") != std::string::npos) continue;
     const std::string relative = fs::relative(entry.path(), root).string();
     if (relative.find("dispmvs_claims") != std::string::npos ||
+        relative.find("dispmvs_fusion.lock") != std::string::npos ||
         relative.find("dispmvs_records") != std::string::npos) {
       continue;
     }
