@@ -394,4 +394,12 @@ std::vector<PatchMatchEntry> AutoPatchMatchConfig(const SparseModel& model,
   return entries;
 }
 
+void CapAutoSources(std::size_t max_num_sources, std::vector<PatchMatchEntry>* entries) {
+  for (PatchMatchEntry& entry : *entries) {
+    if (entry.sources.kind == SourceSpec::Kind::kAuto) {
+      entry.sources.max_num_sources = std::min(entry.sources.max_num_sources, max_num_sources);
+    }
+  }
+}
+
 }  // namespace dispmvs::colmap_io

@@ -138,4 +138,9 @@ std::vector<StereoProblem> ResolvePatchMatchConfigWithPoseFallback(
 std::vector<PatchMatchEntry> AutoPatchMatchConfig(const SparseModel& model,
                                                   std::size_t max_num_sources);
 
+// Caps N of every `__auto__, N` entry at max_num_sources (dispmvs_colmap's
+// --max_num_src_images: image_undistorter writes `__auto__, 20`, more sources
+// than the network takes); explicit lists and `__all__` stay as written.
+void CapAutoSources(std::size_t max_num_sources, std::vector<PatchMatchEntry>* entries);
+
 }  // namespace dispmvs::colmap_io

@@ -67,11 +67,7 @@ void PlanProblems(const Workspace& workspace, const PlanOptions& options, DenseP
     plan->problems_source =
         "no patch-match.cfg: __auto__, " + std::to_string(max_sources) + " for every image";
   }
-  for (PatchMatchEntry& entry : entries) {
-    if (entry.sources.kind == SourceSpec::Kind::kAuto) {
-      entry.sources.max_num_sources = std::min(entry.sources.max_num_sources, max_sources);
-    }
-  }
+  CapAutoSources(max_sources, &entries);
   // The pose-based selection samples the image's hint before widening (the
   // widening tests the network, not the selection).
   PoseSampleDepths pose_sample_depths(plan->model, plan->depth_ranges);

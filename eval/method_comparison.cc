@@ -35,6 +35,12 @@ void MethodComparisonOptions::Check() const {
       !std::isfinite(cutoff_relative)) {
     throw std::invalid_argument("the relative tau and cut-off must be finite and > 0");
   }
+  if (max_num_src_images < 1 ||
+      static_cast<std::size_t>(max_num_src_images) > colmap_io::kMaxAutoSources) {
+    throw std::invalid_argument("--max_num_src_images must be in [1, " +
+                                std::to_string(colmap_io::kMaxAutoSources) + "], got " +
+                                std::to_string(max_num_src_images));
+  }
   consistency.Check();
 }
 
@@ -143,11 +149,13 @@ void CountAgreement(const DenseArray& a, const DenseArray& b, const std::string&
 }
 
 std::map<image_t, std::vector<image_t>> SourcesOf(const Workspace& workspace,
-                                                  const SparseModel& model) {
+                                                  const SparseModel& model,
+                                                  std::size_t max_num_sources) {
   const fs::path config = workspace.PatchMatchConfigPath();
-  const std::vector<PatchMatchEntry> entries = fs::is_regular_file(config)
-                                                   ? ReadPatchMatchConfig(config)
-                                                   : AutoPatchMatchConfig(model, 4);
+  std::vector<PatchMatchEntry> entries = fs::is_regular_file(config)
+                                             ? ReadPatchMatchConfig(config)
+                                             : AutoPatchMatchConfig(model, max_num_sources);
+  CapAutoSources(max_num_sources, &entries);
   // The sources dispmvs_colmap chooses with its defaults, the fallback to the
   // camera poses included (a workspace without sparse points).
   const std::map<image_t, DepthRange> ranges = ComputeDepthRanges(model);
@@ -201,7 +209,7 @@ MethodComparison CompareMethods(const fs::path& workspace_path,
   options.Check();
   const Workspace workspace(workspace_path);
   const SparseModel model = workspace.ReadModel();
-  const std::map<image_t, std::vector<image_t>> sources = SourcesOf(workspace, model);
+  const std::map<image_t, std::vector<image_t>> sources = SourcesOf(workspace, model, static_cast<std::size_t>(options.max_num_src_images));
   MethodComparison report;
   report.workspace = workspace_path.string();
   report.type_a = options.type_a;

@@ -46,6 +46,10 @@ struct MethodComparisonOptions {
   // Clouds (both or neither).
   std::string ply_a, ply_b;
   double tau_relative = 0.002, cutoff_relative = 0.02;  // of B's diagonal
+  // `__auto__, N` sources are capped at this many, as dispmvs_colmap's
+  // --max_num_src_images caps them (same default), so that the maps are
+  // checked against the sources the run used.
+  int max_num_src_images = 4;
 
   static fusion::GeometricFilterOptions DefaultConsistency();
   void Check() const;  // std::invalid_argument naming the problem

@@ -5,6 +5,7 @@
 
 #include "eval/method_comparison.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <string>
@@ -15,6 +16,7 @@
 #include "colmap_io/dense_array.h"
 #include "colmap_io/ply.h"
 #include "colmap_io/sparse_model_io.h"
+#include "colmap_io/stereo_config.h"
 #include "colmap_io/workspace.h"
 #include "eval/comparison_report.h"
 #include "examples/example_workspace.h"
@@ -202,6 +204,28 @@ TEST_F(MethodComparisonTest, SourcesComeFromThePosesWithoutSparsePoints) {
     const bool end = view.name == "view_00.png" || view.name == "view_06.png";
     EXPECT_EQ(view.sources_a, end ? 3 : 4) << view.name;
   }
+}
+
+TEST_F(MethodComparisonTest, AutoSourcesAreCappedAsDispmvsColmapCapsThem) {
+  // image_undistorter writes `__auto__, 20`; dispmvs_colmap takes at most
+  // --max_num_src_images (4 by default) of them, and so must the check.
+  const colmap_io::Workspace workspace(root_);
+  colmap_io::WritePatchMatchConfig(colmap_io::AutoPatchMatchConfig(workspace.ReadModel(), 20),
+                                   workspace.PatchMatchConfigPath());
+  MethodComparisonOptions options;
+  options.type_a = "exact";
+  options.type_b = "perturbed";
+  for (const ViewComparison& view : CompareMethods(root_, options).views) {
+    EXPECT_EQ(view.sources_a, 4) << view.name;
+  }
+  options.max_num_src_images = 20;
+  int most = 0;
+  for (const ViewComparison& view : CompareMethods(root_, options).views) {
+    most = std::max(most, view.sources_a);
+  }
+  EXPECT_GT(most, 4);  // 7 images: up to 6 sources share points with a view
+  options.max_num_src_images = 0;
+  EXPECT_THROW(CompareMethods(root_, options), std::invalid_argument);
 }
 
 TEST_F(MethodComparisonTest, RefusesBadRequests) {

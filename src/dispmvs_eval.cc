@@ -43,8 +43,9 @@ agreement, the shared pixels within 1 / 2 / 5 % of each other
 (2 |a - b| / (a + b)); and each method's own multi-view consistency, the
 share of its valid pixels that at least one source view's map of the same
 method agrees with (reprojection within 1 px and depth within 1 %, the test
-fusion applies; sources from patch-match.cfg, else __auto__, 4, from the
-camera poses where no sparse point is shared, as dispmvs_colmap does). With
+fusion applies; sources from patch-match.cfg, else __auto__, 4, N of
+`__auto__, N` capped at --max_num_src_images, from the camera poses where no
+sparse point is shared, as dispmvs_colmap chooses them). With
 --compare_ply, the clouds too: mean distance A -> B and B -> A, and the
 shares of each within tau of the other, tau and the cut-off as fractions of
 B's bounding-box diagonal (--tau_rel, --cutoff_rel).
@@ -122,6 +123,7 @@ struct Options {
   std::string workspace_path;
   std::string compare;      // "TYPE_A,TYPE_B": method against method, no ground truth
   std::string compare_ply;  // "A.ply,B.ply"
+  int max_num_src_images = 4;  // --compare: cap of `__auto__, N`
   std::string types;
   std::string json_path;
   std::string tsv_path;
@@ -160,6 +162,9 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "e.g. dispmvs.geometric,geometric for ours against PatchMatch's.")
       ("compare_ply", po::value<std::string>(&o.compare_ply),
        "A.ply,B.ply: with --compare, also the two fused clouds, each against the other.")
+      ("max_num_src_images", po::value<int>(&o.max_num_src_images)->default_value(4),
+       "With --compare: at most this many `__auto__` sources per view for the consistency "
+       "test; pass the value the dispmvs_colmap run used (its option of the same name).")
       ("types", po::value<std::string>(&o.types),
        "Comma-separated depth-map TYPEs, e.g. dispmvs.geometric,geometric; default: every "
        "TYPE found under WS/stereo/depth_maps. A TYPE without maps is reported as such.")
@@ -195,8 +200,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   if (values.count("workspace_path") == 0 || o.workspace_path.empty()) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
   }
-  if (values.count("compare_ply") > 0 && values.count("compare") == 0) {
-    throw std::invalid_argument("--compare_ply needs --compare");
+  for (const char* option : {"compare_ply", "max_num_src_images"}) {
+    if (values.count(option) > 0 && !values[option].defaulted() && values.count("compare") == 0) {
+      throw std::invalid_argument(std::string("--") + option + " needs --compare");
+    }
   }
   if (values.count("compare") > 0) {
     for (const char* other : {"types", "ply", "tsv", "png_dir"}) {
@@ -251,6 +258,7 @@ int RunComparison(const Options& options) {
   if (!options.compare_ply.empty()) {
     std::tie(compare.ply_a, compare.ply_b) = SplitPair(options.compare_ply, "compare_ply");
   }
+  compare.max_num_src_images = options.max_num_src_images;
   compare.tau_relative = options.eval.tau_relative;
   compare.cutoff_relative = options.eval.cutoff_relative;
   const eval::MethodComparison report = eval::CompareMethods(options.workspace_path, compare);
