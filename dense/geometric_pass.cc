@@ -1,7 +1,7 @@
 #include "dense/geometric_pass.h"
 
-#include <cstddef>
 #include <algorithm>
+#include <cstddef>
 #include <filesystem>
 #include <map>
 #include <string>

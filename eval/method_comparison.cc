@@ -209,7 +209,8 @@ MethodComparison CompareMethods(const fs::path& workspace_path,
   options.Check();
   const Workspace workspace(workspace_path);
   const SparseModel model = workspace.ReadModel();
-  const std::map<image_t, std::vector<image_t>> sources = SourcesOf(workspace, model, static_cast<std::size_t>(options.max_num_src_images));
+  const std::map<image_t, std::vector<image_t>> sources =
+      SourcesOf(workspace, model, static_cast<std::size_t>(options.max_num_src_images));
   MethodComparison report;
   report.workspace = workspace_path.string();
   report.type_a = options.type_a;

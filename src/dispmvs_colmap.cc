@@ -70,8 +70,8 @@ and fusion write shared outputs, so one process at a time runs them (a lock
 on WS/stereo/dispmvs_fusion.lock; another stops with an error), and it first
 removes the temporary files that killed runs left beside those outputs. Each
 computed view's time goes to WS/stereo/dispmvs_records/NAME.txt, which the
-run report (WS/dispmvs_report.html) shows. examples/slurm/ runs the shards on a Slurm
-cluster (a job array, then a dependent fusion job).
+run report (WS/dispmvs_report.html) shows. examples/slurm/ runs the shards
+on a Slurm cluster (a job array, then a dependent fusion job).
 
 Depth range: each image's range comes from the sparse points it sees (COLMAP's
 percentiles and margin; an image seeing none takes the union of the others'),
@@ -450,9 +450,10 @@ int Run(const Options& options) {
     }
   }
   if ((options.mode == "full" || options.mode == "fuse") && !fusion_claim) {
-    std::cout << "error: the geometric pass and fusion were not run: another process";
-    if (fusion_holder > 0) std::cout << " (pid " << fusion_holder << ")";
-    std::cout << " is running them on this workspace (its lock: "
+    std::cout << std::flush;  // the error after the summaries, where it is read
+    std::cerr << "error: the geometric pass and fusion were not run: another process";
+    if (fusion_holder > 0) std::cerr << " (pid " << fusion_holder << ")";
+    std::cerr << " is running them on this workspace (its lock: "
               << dense::FusionClaimPath(workspace).string()
               << "); once it ends, rerun with --mode fuse\n";
     failed = true;
