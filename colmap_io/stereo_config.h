@@ -63,6 +63,9 @@ constexpr std::size_t kColmapDefaultAutoSources = 20;
 // Largest N accepted in "__auto__, N" (far above any useful value; it only
 // rejects garbage).
 constexpr std::size_t kMaxAutoSources = 100000;
+// The sources per reference dispmvs_colmap takes by default (its
+// --max_num_src_images), and dispmvs_eval --compare with it.
+constexpr int kDefaultMaxNumSourceImages = 4;
 
 // Parses patch-match.cfg. Throws IoError naming `source_name` and the line on:
 // a reference with no sources line after it, a reference "name" that looks

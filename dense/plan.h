@@ -32,7 +32,7 @@ struct PlanOptions {
   // DispMVS was trained with N = 5 views, one reference and 4 sources (paper,
   // Sec. 4). More sources cost memory and time linearly and the network never
   // saw them; COLMAP's own `__auto__, 20` is tuned for PatchMatch.
-  int max_num_src_images = 4;
+  int max_num_src_images = colmap_io::kDefaultMaxNumSourceImages;
   // COLMAP's PatchMatchStereo.min_triangulation_angle default, degrees.
   double min_triangulation_angle = 1.0;
   // Depth-range hint from the sparse points (colmap_io/depth_range.h; the

@@ -33,6 +33,7 @@
 #include <string>
 #include <vector>
 
+#include "colmap_io/stereo_config.h"
 #include "eval/cloud_metrics.h"
 #include "fusion/geometric_filter.h"
 
@@ -49,7 +50,7 @@ struct MethodComparisonOptions {
   // `__auto__, N` sources are capped at this many, as dispmvs_colmap's
   // --max_num_src_images caps them (same default), so that the maps are
   // checked against the sources the run used.
-  int max_num_src_images = 4;
+  int max_num_src_images = colmap_io::kDefaultMaxNumSourceImages;
 
   static fusion::GeometricFilterOptions DefaultConsistency();
   void Check() const;  // std::invalid_argument naming the problem

@@ -383,8 +383,9 @@ int Run(const Options& options) {
   // Likewise a --min_num_consistent that the sources cannot meet (a stereo
   // pair has one source map per view): said now, not as an empty fused.ply
   // after the network has run.
+  const bool runs_fusion = options.mode == "full" || options.mode == "fuse";
   std::string consistency_warning;
-  if (options.mode == "full" || options.mode == "fuse") {
+  if (runs_fusion) {
     consistency_warning = dense::PlanMinConsistentViews(
         options.filter.min_consistent_views, options.min_num_consistent_given, &plan);
   }
@@ -401,7 +402,7 @@ int Run(const Options& options) {
   // A fusion.cfg naming unknown images, or an output that cannot be written,
   // fails now, not after the network has run.
   dense::CheckMapFoldersWritable(workspace);
-  if (options.mode == "full" || options.mode == "fuse") {
+  if (runs_fusion) {
     dense::FusionImageOrder(workspace, plan);
     colmap_io::AtomicFileWriter probe(ply);  // a temporary file, removed at once
   }
@@ -418,7 +419,7 @@ int Run(const Options& options) {
   // killed runs left beside them.
   std::optional<dense::ViewClaim> fusion_claim;
   long fusion_holder = 0;
-  if (options.mode == "full" || options.mode == "fuse") {
+  if (runs_fusion) {
     fusion_claim = dense::ClaimGeometricAndFusion(workspace, plan, ply, {report_path}, std::cout,
                                                   &fusion_holder);
   }
@@ -449,7 +450,7 @@ int Run(const Options& options) {
       PrintEmptyCloudWarning(options, plan, *fusion_summary, ply);
     }
   }
-  if ((options.mode == "full" || options.mode == "fuse") && !fusion_claim) {
+  if (runs_fusion && !fusion_claim) {
     std::cout << std::flush;  // the error after the summaries, where it is read
     std::cerr << "error: the geometric pass and fusion were not run: another process";
     if (fusion_holder > 0) std::cerr << " (pid " << fusion_holder << ")";

@@ -16,6 +16,7 @@
 #include <utility>
 #include <vector>
 
+#include "colmap_io/stereo_config.h"
 #include "eval/comparison_report.h"
 #include "eval/method_comparison.h"
 #include "eval/report.h"
@@ -123,7 +124,7 @@ struct Options {
   std::string workspace_path;
   std::string compare;      // "TYPE_A,TYPE_B": method against method, no ground truth
   std::string compare_ply;  // "A.ply,B.ply"
-  int max_num_src_images = 4;  // --compare: cap of `__auto__, N`
+  int max_num_src_images = colmap_io::kDefaultMaxNumSourceImages;  // --compare only
   std::string types;
   std::string json_path;
   std::string tsv_path;
@@ -162,7 +163,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "e.g. dispmvs.geometric,geometric for ours against PatchMatch's.")
       ("compare_ply", po::value<std::string>(&o.compare_ply),
        "A.ply,B.ply: with --compare, also the two fused clouds, each against the other.")
-      ("max_num_src_images", po::value<int>(&o.max_num_src_images)->default_value(4),
+      ("max_num_src_images", po::value<int>(&o.max_num_src_images)->default_value(o.max_num_src_images),
        "With --compare: at most this many `__auto__` sources per view for the consistency "
        "test; pass the value the dispmvs_colmap run used (its option of the same name).")
       ("types", po::value<std::string>(&o.types),
