@@ -80,7 +80,9 @@ options (default):
                               and the saved weights keep the config's (0)
   --max_cpu_minutes M         stop (checkpoint, validate, write the model) after M minutes of
                               process CPU time; 0 = no limit (0)
-  --max_minutes M             the same after M minutes of wall-clock time (0)
+  --max_minutes M             the same after M minutes of wall-clock time (0). Both budgets count
+                              from the first step: setup (restoring the checkpoint, loading
+                              textures, generating the validation scenes) comes on top
   --init_weights FILE         start from these weights (e.g. models/dispmvs_small.safetensors,
                               to fine-tune at a larger size) instead of a random initialisation;
                               the file must fit --config (none)

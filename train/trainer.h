@@ -110,11 +110,14 @@ struct TrainOptions {
   double difficulty_start = 1.0;
   int64_t difficulty_ramp_steps = 0;
   // Stop (checkpoint, validate, write model.safetensors) once this process
-  // has used this much CPU time (all threads), 0 = no limit: equal-CPU-time
-  // comparisons, and runs that must end before a deadline.
+  // has used this much CPU time (all threads) in training steps, 0 = no
+  // limit: equal-CPU-time comparisons, and runs that must end before a
+  // deadline.
   double max_cpu_minutes = 0;
-  // The same in wall-clock minutes since the run started (a GPU run with a
-  // fixed device lease), 0 = no limit.
+  // The same in wall-clock minutes since the first step (a GPU run with a
+  // fixed device lease), 0 = no limit. Both budgets leave out the setup
+  // (restoring, textures, validation scenes), which can take minutes on a
+  // busy CPU: a caller with a hard deadline leaves room for it.
   double max_minutes = 0;
   // CPU training: return freed blocks above 32 MiB to the system after each
   // use, as glibc does by default, instead of keeping every freed block for
