@@ -110,7 +110,7 @@ struct TrainOptions {
   double difficulty_start = 1.0;
   int64_t difficulty_ramp_steps = 0;
   // Stop (checkpoint, validate, write model.safetensors) once this process
-  // has used this much CPU time (all threads) in training steps, 0 = no
+  // has used this much CPU time (all threads) since the first step, 0 = no
   // limit: equal-CPU-time comparisons, and runs that must end before a
   // deadline.
   double max_cpu_minutes = 0;
