@@ -14,6 +14,12 @@
 // (0 small, 1 paper), intra-op threads. Features are random: the cost does
 // not depend on their values; the matches sit on random lines inside the map,
 // as during a pass.
+//
+// The *Training benchmarks time a training step's correlations, forward and
+// backward, with the ATen ops against the fused node of correlation_cpu.h
+// (see their comment); run them on their own:
+//
+//   correlation_microbench --benchmark_filter=Training
 
 #include <cstdint>
 #include <string>
@@ -24,6 +30,8 @@
 
 #include "model/config.h"
 #include "model/correlation.h"
+#include "model/host_allocator.h"
+#include "model/segment_correlation.h"
 
 namespace {
 
@@ -176,6 +184,109 @@ void ForwardPassShapes(benchmark::internal::Benchmark* b) {
   }
   b->Unit(benchmark::kMillisecond)->UseRealTime();
 }
+
+// --- Training: forward and backward, the fused node against the ATen ops ---
+//
+// A training step's correlations at the shipped model's training size
+// (640x480, batch 2 x 5 sources = 10 pairs): the fine stage builds its
+// pyramid once and looks it up at each of its 2 iterations; the coarse stage
+// builds its segment volume once. Each iteration here runs that forward
+// with the features requiring a gradient, then the backward of a weighted
+// sum. Matches lie near their own pixel (+- 8 px), as between neighbouring
+// views, so the memory access has the locality of a real step. The C
+// allocator keeps every freed block, as dispmvs_train sets it (the setting
+// then stays for the rest of the process: hence --benchmark_filter).
+// Arguments: implementation (0 ATen ops, 1 fused), intra-op threads.
+constexpr int64_t kTrainPairs = 10, kTrainWidth = 640, kTrainHeight = 480;
+
+struct TrainingProblem {
+  torch::Tensor source, reference, base_xy, dir, eflow, weights;
+};
+
+TrainingProblem MakeTrainingProblem(int64_t stride, int64_t channels, int64_t outputs_per_pixel) {
+  const int64_t h = kTrainHeight / stride, w = kTrainWidth / stride;
+  torch::manual_seed(0);
+  TrainingProblem p;
+  p.source = torch::randn({kTrainPairs, channels, h, w});
+  p.reference = torch::randn({kTrainPairs, channels, h, w});
+  const torch::Tensor x =
+      torch::arange(w, torch::kFloat).view({1, 1, w}).expand({kTrainPairs, h, w});
+  const torch::Tensor y =
+      torch::arange(h, torch::kFloat).view({1, h, 1}).expand({kTrainPairs, h, w});
+  const double spread = 8.0 / static_cast<double>(stride / 4);
+  p.base_xy = torch::stack({x + torch::randn({kTrainPairs, h, w}) * spread,
+                            y + torch::randn({kTrainPairs, h, w}) * spread},
+                           1);
+  const torch::Tensor angle = torch::rand({kTrainPairs, 1, h, w}) * 6.2832;
+  p.dir = torch::cat({torch::cos(angle), torch::sin(angle)}, 1);
+  p.eflow = torch::randn({kTrainPairs, 1, h, w});
+  if (outputs_per_pixel > 0) p.weights = torch::randn({kTrainPairs, outputs_per_pixel, h, w});
+  return p;
+}
+
+dispmvs::model::CorrelationImpl ImplArgument(const benchmark::State& state) {
+  return state.range(0) == 1 ? dispmvs::model::CorrelationImpl::kAuto
+                             : dispmvs::model::CorrelationImpl::kAtenOps;
+}
+
+void BM_FineStageTraining(benchmark::State& state) {
+  dispmvs::model::KeepAllFreedTensorMemory();
+  torch::set_num_threads(static_cast<int>(state.range(1)));
+  const ModelConfig config = ModelConfig::Small();
+  const int64_t levels = config.fine_levels, samples = config.fine_samples, iterations = 2;
+  const TrainingProblem p = MakeTrainingProblem(4, config.match_fine_channels, levels * samples);
+  for (auto _ : state) {
+    const torch::Tensor source = p.source.clone().requires_grad_(true);
+    const torch::Tensor reference = p.reference.clone().requires_grad_(true);
+    const EpipolarCorrelation correlation(source, levels, samples, ImplArgument(state));
+    torch::Tensor loss = torch::zeros({});
+    for (int64_t t = 0; t < iterations; ++t) {
+      const torch::Tensor eflow = p.eflow + static_cast<double>(t);
+      loss = loss + (correlation.Lookup(reference, p.base_xy, p.dir, eflow).cost * p.weights).sum();
+    }
+    loss.backward();
+    benchmark::DoNotOptimize(source.grad().data_ptr());
+  }
+  state.SetLabel(ImplArgument(state) == dispmvs::model::CorrelationImpl::kAuto ? "fused"
+                                                                                : "ATen ops");
+}
+
+void BM_SegmentVolumeTraining(benchmark::State& state) {
+  dispmvs::model::KeepAllFreedTensorMemory();
+  torch::set_num_threads(static_cast<int>(state.range(1)));
+  const ModelConfig config = ModelConfig::Small();
+  const TrainingProblem p = MakeTrainingProblem(16, config.match_coarse_channels, 0);
+  // Segments as long as the coarse map's width: the length of a typical
+  // segment across the 40x30 map.
+  dispmvs::model::EpipolarSegment segment;
+  segment.base_xy = p.base_xy;
+  segment.dir = p.dir;
+  segment.start = torch::full_like(p.eflow, -20.0);
+  segment.end = torch::full_like(p.eflow, 20.0);
+  segment.valid = torch::ones_like(p.eflow, torch::kBool);
+  for (auto _ : state) {
+    const torch::Tensor source = p.source.clone().requires_grad_(true);
+    const torch::Tensor reference = p.reference.clone().requires_grad_(true);
+    const dispmvs::model::SegmentCorrelation volume(reference, source, segment,
+                                                   config.coarse_levels, config.coarse_samples,
+                                                   ImplArgument(state));
+    volume.volume().sum().backward();
+    benchmark::DoNotOptimize(source.grad().data_ptr());
+  }
+  state.SetLabel(ImplArgument(state) == dispmvs::model::CorrelationImpl::kAuto ? "fused"
+                                                                                : "ATen ops");
+}
+
+void TrainingShapes(benchmark::internal::Benchmark* b) {
+  b->ArgNames({"fused", "threads"});
+  for (int64_t threads = 1; threads <= 2; ++threads) {
+    for (int64_t fused = 0; fused <= 1; ++fused) b->Args({fused, threads});
+  }
+  b->Unit(benchmark::kMillisecond)->UseRealTime();
+}
+
+BENCHMARK(BM_FineStageTraining)->Apply(TrainingShapes);
+BENCHMARK(BM_SegmentVolumeTraining)->Apply(TrainingShapes);
 
 BENCHMARK(BM_Pyramid)->Apply(ForwardPassShapes);
 BENCHMARK(BM_Lookup)->Apply(ForwardPassShapes);

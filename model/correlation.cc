@@ -26,7 +26,7 @@ void CheckShape(const torch::Tensor& t, const char* name, int64_t batch, int64_t
 }  // namespace
 
 EpipolarCorrelation::EpipolarCorrelation(const torch::Tensor& source_features, int64_t levels,
-                                         int64_t samples)
+                                         int64_t samples, CorrelationImpl impl)
     : samples_(samples) {
   if (!source_features.defined() || source_features.dim() != 4 || source_features.size(0) < 1 ||
       source_features.size(1) < 1 || source_features.size(2) < 1 || source_features.size(3) < 1) {
@@ -48,9 +48,9 @@ EpipolarCorrelation::EpipolarCorrelation(const torch::Tensor& source_features, i
     pyramid_.push_back(F::avg_pool2d(pyramid_.back(),
                                      F::AvgPool2dFuncOptions(2).stride(2).ceil_mode(true)));
   }
-  // Inference on the CPU reads channels-last copies of the levels (the fused
-  // lookup of correlation_cpu.h).
-  if (CanUseFusedCorrelation(source_features, source_features)) {
+  // The fused lookup of correlation_cpu.h reads channels-last copies of the
+  // levels.
+  if (impl == CorrelationImpl::kAuto && FusedCorrelationTakes(source_features)) {
     for (const torch::Tensor& level : pyramid_) {
       levels_hwc_.push_back(level.permute({0, 2, 3, 1}).contiguous());
     }
@@ -86,7 +86,8 @@ CorrelationSamples EpipolarCorrelation::Lookup(const torch::Tensor& ref_features
   // [B, C, samples, h, w] floats twice (the samples and their products with
   // the reference), 1.1 GB at the fine stage of 1600x1152 with 5 sources;
   // one at a time holds a samples-th of it, for the same arithmetic.
-  const bool fused = !levels_hwc_.empty() && CanUseFusedCorrelation(src0, ref_features);
+  const bool fused =
+      !levels_hwc_.empty() && CanUseFusedCorrelation(src0, ref_features, match, dir);
   std::vector<torch::Tensor> costs;
   std::vector<torch::Tensor> insides;
   costs.reserve(pyramid_.size() * static_cast<size_t>(samples_));

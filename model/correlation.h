@@ -39,11 +39,20 @@ struct CorrelationSamples {
   torch::Tensor inside;  // [B, levels*samples, h, w] bool: sample centre inside its level's map
 };
 
+// Which implementation a correlation runs. kAuto: the fused CPU passes of
+// correlation_cpu.h wherever they apply (CPU float32 features and no
+// gradient wanted w.r.t. the match: inference, and training, whose matches
+// are detached), ATen ops elsewhere (a GPU, float64, a gradient to the
+// E-flow). kAtenOps: always the ATen ops, the reference that tests and
+// benchmarks compare the fused passes with.
+enum class CorrelationImpl { kAuto, kAtenOps };
+
 class EpipolarCorrelation {
  public:
   // source_features [B, C, H, W]; levels >= 1, samples >= 1.
   // Throws std::invalid_argument on a bad shape or count.
-  EpipolarCorrelation(const torch::Tensor& source_features, int64_t levels, int64_t samples);
+  EpipolarCorrelation(const torch::Tensor& source_features, int64_t levels, int64_t samples,
+                      CorrelationImpl impl = CorrelationImpl::kAuto);
 
   // ref_features [B, C, h, w]; base_xy, dir [B, 2, h, w] (stage pixels; dir a
   // unit vector or 0); eflow [B, 1, h, w]. The reference grid (h, w) need not
@@ -59,8 +68,9 @@ class EpipolarCorrelation {
 
  private:
   std::vector<torch::Tensor> pyramid_;
-  // The levels as [B,H_l,W_l,C], made only for inference on the CPU, where
-  // Lookup runs the fused pass of correlation_cpu.h; empty otherwise.
+  // The levels as [B,H_l,W_l,C] (autograd tracks the copy), made only for
+  // CPU float features under kAuto, where Lookup runs the fused pass of
+  // correlation_cpu.h; empty otherwise.
   std::vector<torch::Tensor> levels_hwc_;
   int64_t samples_;
 };

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "model/correlation_cpu.h"
+
 namespace dispmvs::model {
 namespace {
 
@@ -69,44 +71,59 @@ double Bilinear(const Map& m, int64_t c, double x, double y) {
   return sum;
 }
 
-// Both paths of Lookup: the ATen ops (autograd on, as in training) and the
-// fused CPU pass of correlation_cpu.h (inference). C = 19 exercises the
-// fused pass's vector lanes and its tail.
-class EpipolarCorrelationPathTest : public ::testing::TestWithParam<bool> {
+// The three paths of Lookup: the ATen ops (autograd on), the fused CPU pass
+// of correlation_cpu.h in inference (autograd off) and in training (autograd
+// on, features requiring a gradient: the pass as an autograd node). C = 19
+// exercises the fused pass's vector lanes and its tail.
+enum class Path { kAtenOps, kFusedInference, kFusedTraining };
+
+class EpipolarCorrelationPathTest : public ::testing::TestWithParam<Path> {
  protected:
-  bool inference() const { return GetParam(); }
+  void SetUp() override {
+    if (GetParam() == Path::kFusedInference) no_grad_.emplace();
+  }
+  CorrelationImpl impl() const {
+    return GetParam() == Path::kAtenOps ? CorrelationImpl::kAtenOps : CorrelationImpl::kAuto;
+  }
+  // A feature map as the path needs it: a leaf requiring a gradient when
+  // training.
+  torch::Tensor Features(torch::Tensor t) const {
+    return GetParam() == Path::kFusedTraining ? t.requires_grad_(true) : t;
+  }
+
+ private:
+  std::optional<torch::NoGradGuard> no_grad_;
 };
 
 TEST_P(EpipolarCorrelationPathTest, MatchesNaivePerPixelLoop) {
-  std::optional<torch::NoGradGuard> no_grad;
-  if (inference()) no_grad.emplace();
   torch::manual_seed(7);
   const int64_t B = 2, C = 19, H = 7, W = 6, h = 4, w = 5, levels = 3, samples = 5;
-  const torch::Tensor source = torch::randn({B, C, H, W});
-  const torch::Tensor ref = torch::randn({B, C, h, w});
+  const torch::Tensor source = Features(torch::randn({B, C, H, W}));
+  const torch::Tensor ref = Features(torch::randn({B, C, h, w}));
   const torch::Tensor base = torch::rand({B, 2, h, w}) * 10.0 - 2.0;  // some outside
   const torch::Tensor angle = torch::rand({B, 1, h, w}) * 6.283;
   torch::Tensor dir = torch::cat({torch::cos(angle), torch::sin(angle)}, 1);
   dir.index_put_({0, torch::indexing::Slice(), 1, 1}, 0.0);  // a degenerate pixel
   const torch::Tensor eflow = torch::rand({B, 1, h, w}) * 4.0 - 2.0;
 
-  const EpipolarCorrelation corr(source, levels, samples);
+  const EpipolarCorrelation corr(source, levels, samples, impl());
   ASSERT_EQ(corr.levels(), levels);
   ASSERT_EQ(corr.channels(), levels * samples);
   const CorrelationSamples out = corr.Lookup(ref, base, dir, eflow);
   ASSERT_EQ(out.cost.sizes(), torch::IntArrayRef({B, levels * samples, h, w}));
   ASSERT_EQ(out.inside.sizes(), out.cost.sizes());
 
-  auto cost = out.cost.accessor<float, 4>();
+  const torch::Tensor cost_values = out.cost.detach();
+  auto cost = cost_values.accessor<float, 4>();
   auto inside = out.inside.accessor<bool, 4>();
   auto bxy = base.accessor<float, 4>();
   auto d = dir.accessor<float, 4>();
   auto e = eflow.accessor<float, 4>();
   int outside_count = 0;
   for (int64_t b = 0; b < B; ++b) {
-    std::vector<Map> pyramid{ToMap(source, b)};
+    std::vector<Map> pyramid{ToMap(source.detach(), b)};
     for (int64_t l = 1; l < levels; ++l) pyramid.push_back(Pool(pyramid.back()));
-    const Map r = ToMap(ref, b);
+    const Map r = ToMap(ref.detach(), b);
     for (int64_t y = 0; y < h; ++y)
       for (int64_t x = 0; x < w; ++x) {
         const double mx = bxy[b][0][y][x] + d[b][0][y][x] * e[b][0][y][x];
@@ -151,11 +168,9 @@ TEST(EpipolarCorrelationTest, SampleSpacingIsOnePixelOfEachLevel) {
 }
 
 TEST_P(EpipolarCorrelationPathTest, OutsideSamplesReadZeroAndAreReported) {
-  std::optional<torch::NoGradGuard> no_grad;
-  if (inference()) no_grad.emplace();
-  const torch::Tensor ones = torch::ones({1, 2, 4, 4});
-  const EpipolarCorrelation corr(ones, 1, 3);
-  const torch::Tensor ref = torch::ones({1, 2, 1, 1});
+  const torch::Tensor ones = Features(torch::ones({1, 2, 4, 4}));
+  const EpipolarCorrelation corr(ones, 1, 3, impl());
+  const torch::Tensor ref = Features(torch::ones({1, 2, 1, 1}));
   const torch::Tensor dir = torch::tensor({1.0f, 0.0f}).view({1, 2, 1, 1});
   const torch::Tensor eflow = torch::zeros({1, 1, 1, 1});
   // Samples at x = -1.5, -0.5, 0.5 on row 2: outside, half outside, inside.
@@ -172,12 +187,26 @@ TEST_P(EpipolarCorrelationPathTest, OutsideSamplesReadZeroAndAreReported) {
   const torch::Tensor far = torch::tensor({1e30f, std::nanf("")}).view({1, 2, 1, 1});
   const torch::Tensor far_cost = corr.Lookup(ref, far, dir, eflow).cost;
   EXPECT_TRUE(torch::all(far_cost == 0).item<bool>());
+  if (GetParam() == Path::kAtenOps) return;
+  // No NaN in the fused pass's gradient either (the ATen ops' grid_sample
+  // backward is PyTorch's business).
+  if (GetParam() == Path::kFusedTraining) {
+    corr.Lookup(ref, far, dir, eflow).cost.sum().backward();
+    EXPECT_TRUE(torch::all(torch::isfinite(ones.grad())).item<bool>());
+    EXPECT_TRUE(torch::all(torch::isfinite(ref.grad())).item<bool>());
+  }
 }
 
-INSTANTIATE_TEST_SUITE_P(AtenAndFused, EpipolarCorrelationPathTest, ::testing::Bool(),
-                         [](const ::testing::TestParamInfo<bool>& info) {
-                           return info.param ? std::string("FusedInference")
-                                             : std::string("AtenOps");
+INSTANTIATE_TEST_SUITE_P(AtenAndFused, EpipolarCorrelationPathTest,
+                         ::testing::Values(Path::kAtenOps, Path::kFusedInference,
+                                           Path::kFusedTraining),
+                         [](const ::testing::TestParamInfo<Path>& info) {
+                           switch (info.param) {
+                             case Path::kAtenOps: return std::string("AtenOps");
+                             case Path::kFusedInference: return std::string("FusedInference");
+                             case Path::kFusedTraining: return std::string("FusedTraining");
+                           }
+                           return std::string();
                          });
 
 // The two paths against each other at a realistic size (48 channels, two
@@ -192,12 +221,70 @@ TEST(EpipolarCorrelationTest, FusedInferenceEqualsAtenOps) {
   const torch::Tensor angle = torch::rand({B, 1, h, w}) * 6.283;
   const torch::Tensor dir = torch::cat({torch::cos(angle), torch::sin(angle)}, 1);
   const torch::Tensor eflow = torch::randn({B, 1, h, w}) * 3.0;
-  const CorrelationSamples aten = EpipolarCorrelation(source, 2, 5).Lookup(ref, base, dir, eflow);
+  const CorrelationSamples aten =
+      EpipolarCorrelation(source, 2, 5, CorrelationImpl::kAtenOps).Lookup(ref, base, dir, eflow);
   torch::NoGradGuard no_grad;
   const CorrelationSamples fused = EpipolarCorrelation(source, 2, 5).Lookup(ref, base, dir, eflow);
   EXPECT_TRUE(torch::equal(fused.inside, aten.inside));
   EXPECT_LT((fused.cost - aten.cost).abs().max().item<float>(), 1e-5f);
   EXPECT_GT(aten.cost.abs().mean().item<float>(), 0.01f);  // not a comparison of zeros
+}
+
+// Training's lookup: the fused node's gradients w.r.t. the source features
+// (through the pooled pyramid and the channels-last copies) and the
+// reference features, against PyTorch's grid_sample backward, at a
+// realistic size with matches partly off the map and a reference with
+// non-contiguous strides. The gradient weights every output differently, so
+// a sample's gradient sent to the wrong corner or level shows.
+TEST(EpipolarCorrelationTest, FusedTrainingGradientsEqualAtenOps) {
+  torch::manual_seed(5);
+  const int64_t B = 3, C = 48, H = 30, W = 40, h = 30, w = 40, levels = 2, samples = 5;
+  const torch::Tensor source_values = torch::randn({B, C, H, W});
+  const torch::Tensor ref_values = torch::randn({B, w, h, C});
+  const torch::Tensor base = torch::rand({B, 2, h, w}) * 50.0 - 5.0;
+  const torch::Tensor angle = torch::rand({B, 1, h, w}) * 6.283;
+  const torch::Tensor dir = torch::cat({torch::cos(angle), torch::sin(angle)}, 1);
+  const torch::Tensor eflow = torch::randn({B, 1, h, w}) * 3.0;
+  const torch::Tensor weights = torch::randn({B, levels * samples, h, w});
+  struct Result {
+    torch::Tensor cost, source_grad, ref_grad;
+    std::string node;
+  };
+  const auto run = [&](CorrelationImpl impl) {
+    torch::Tensor source = source_values.clone().requires_grad_(true);
+    torch::Tensor ref_leaf = ref_values.clone().requires_grad_(true);
+    const torch::Tensor ref = ref_leaf.permute({0, 3, 2, 1});  // [B,C,h,w], not contiguous
+    const torch::Tensor cost =
+        EpipolarCorrelation(source, levels, samples, impl).Lookup(ref, base, dir, eflow).cost;
+    (cost * weights).sum().backward();
+    return Result{cost.detach(), source.grad(), ref_leaf.grad().permute({0, 3, 2, 1}),
+                  cost.grad_fn() ? cost.grad_fn()->name() : std::string()};
+  };
+  const Result aten = run(CorrelationImpl::kAtenOps);
+  const Result fused = run(CorrelationImpl::kAuto);
+  EXPECT_NE(fused.node.find("LookupFunction"), std::string::npos) << fused.node;
+  EXPECT_EQ(aten.node.find("LookupFunction"), std::string::npos) << aten.node;
+  EXPECT_LT((fused.cost - aten.cost).abs().max().item<float>(), 1e-5f);
+  const auto relative = [](const torch::Tensor& a, const torch::Tensor& b) {
+    return ((a - b).abs().max() / b.abs().max()).item<float>();
+  };
+  EXPECT_GT(aten.source_grad.abs().max().item<float>(), 0.01f);  // not a comparison of zeros
+  EXPECT_GT(aten.ref_grad.abs().max().item<float>(), 0.01f);
+  EXPECT_LT(relative(fused.source_grad, aten.source_grad), 1e-5f);
+  EXPECT_LT(relative(fused.ref_grad, aten.ref_grad), 1e-5f);
+}
+
+TEST(EpipolarCorrelationTest, FusedLookupRefusesAGradientToTheMatch) {
+  const torch::Tensor level = torch::randn({1, 2, 2, 3}).requires_grad_(true);
+  const torch::Tensor ref = torch::randn({1, 3, 1, 1});
+  const torch::Tensor match = torch::zeros({1, 2, 1, 1}).requires_grad_(true);
+  const torch::Tensor dir = torch::zeros({1, 2, 1, 1});
+  EXPECT_FALSE(CanUseFusedCorrelation(level, ref, match, dir));
+  EXPECT_THROW(FusedCorrelationLookup({level}, ref, match, dir, 3), std::invalid_argument);
+  torch::NoGradGuard no_grad;  // inference: no gradient anywhere, so the pass serves
+  EXPECT_TRUE(CanUseFusedCorrelation(level, ref, match, dir));
+  EXPECT_EQ(FusedCorrelationLookup({level}, ref, match, dir, 3).sizes(),
+            torch::IntArrayRef({1, 3, 1, 1}));
 }
 
 TEST(EpipolarCorrelationTest, GradientReachesEflowAndFeatures) {

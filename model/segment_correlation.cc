@@ -78,7 +78,7 @@ torch::Tensor AtenVolume(const torch::Tensor& ref_features, const torch::Tensor&
 SegmentCorrelation::SegmentCorrelation(const torch::Tensor& ref_features,
                                        const torch::Tensor& src_features,
                                        const EpipolarSegment& segment, int64_t levels,
-                                       int64_t samples)
+                                       int64_t samples, CorrelationImpl impl)
     : segment_(segment), samples_(samples) {
   Require(src_features.defined() && src_features.dim() == 4 && src_features.size(0) >= 1 &&
               src_features.size(1) >= 1 && src_features.size(2) >= 1 && src_features.size(3) >= 1,
@@ -118,13 +118,14 @@ SegmentCorrelation::SegmentCorrelation(const torch::Tensor& ref_features,
   const torch::Tensor eflows = segment.start + steps;  // [B,L,h,w]
   inside_ = segment.valid & (eflows <= segment.end + 1e-3);
 
+  // The fused lookup of correlation_cpu.h, centred on the middle of the L
+  // samples, gives them all in one pass (sample k at base + (start + k) dir,
+  // to float rounding); with autograd on, its backward is fused too.
+  const torch::Tensor centre =
+      segment.base_xy + (segment.start + 0.5 * static_cast<double>(length - 1)) * segment.dir;
   torch::Tensor volume;
-  if (CanUseFusedCorrelation(src_features, ref_features)) {
-    // Inference on the CPU: the fused lookup of correlation_cpu.h, centred
-    // on the middle of the L samples, gives them all in one pass (sample k
-    // at base + (start + k) dir, to float rounding).
-    const torch::Tensor centre =
-        segment.base_xy + (segment.start + 0.5 * static_cast<double>(length - 1)) * segment.dir;
+  if (impl == CorrelationImpl::kAuto &&
+      CanUseFusedCorrelation(src_features, ref_features, centre, segment.dir)) {
     volume = FusedCorrelationLookup({src_features.permute({0, 2, 3, 1}).contiguous()},
                                     ref_features, centre, segment.dir, length);
   } else {

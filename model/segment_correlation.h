@@ -43,10 +43,12 @@ class SegmentCorrelation {
   // unit scale.
   // ref_features [B,C,h,w]; src_features [B,C,H,W]; segment on the (h,w)
   // grid for a (H,W) source. levels, samples >= 1. L never exceeds the
-  // source diagonal + 2 (a clipped segment cannot be longer).
+  // source diagonal + 2 (a clipped segment cannot be longer). `impl` as
+  // EpipolarCorrelation's (kAtenOps: the reference for tests).
   // Throws std::invalid_argument on bad shapes or counts.
   SegmentCorrelation(const torch::Tensor& ref_features, const torch::Tensor& src_features,
-                     const EpipolarSegment& segment, int64_t levels, int64_t samples);
+                     const EpipolarSegment& segment, int64_t levels, int64_t samples,
+                     CorrelationImpl impl = CorrelationImpl::kAuto);
 
   // The pyramid lookup at the current match (source pixel [B,2,h,w], stage
   // pixels; it is projected onto the segment's line).

@@ -267,15 +267,9 @@ TEST(SegmentCorrelation, VolumeIsTheDotProductAlongTheSegment) {
   }
 }
 
-// Inference on the CPU builds the volume with the fused lookup of
-// correlation_cpu.h; training with ATen ops. Random segments (some invalid,
-// some leaving the map) on float features: the same volume to float
-// rounding, and the same best matches.
-TEST(SegmentCorrelation, FusedInferenceVolumeEqualsAtenVolume) {
-  torch::manual_seed(21);
-  const int64_t b = 3, c = 64, h = 12, w = 16, src_h = 20, src_w = 26;
-  const torch::Tensor ref = torch::randn({b, c, h, w});
-  const torch::Tensor src = torch::randn({b, c, src_h, src_w});
+// Random segments on a [b, h, w] grid for a 20x26 source: some invalid,
+// some leaving the map.
+EpipolarSegment RandomSegments(int64_t b, int64_t h, int64_t w) {
   EpipolarSegment seg;
   seg.base_xy = torch::rand({b, 2, h, w}) * 30.0 - 2.0;
   const torch::Tensor angle = torch::rand({b, 1, h, w}) * 6.283;
@@ -283,7 +277,20 @@ TEST(SegmentCorrelation, FusedInferenceVolumeEqualsAtenVolume) {
   seg.start = torch::rand({b, 1, h, w}) * -20.0;
   seg.end = seg.start + torch::rand({b, 1, h, w}) * 30.0;
   seg.valid = torch::rand({b, 1, h, w}) > 0.1;
-  const SegmentCorrelation aten(ref, src, seg, /*levels=*/3, /*samples=*/9);
+  return seg;
+}
+
+// Inference on the CPU builds the volume with the fused lookup of
+// correlation_cpu.h, against the ATen ops: on float features, the same
+// volume to float rounding, and the same best matches.
+TEST(SegmentCorrelation, FusedInferenceVolumeEqualsAtenVolume) {
+  torch::manual_seed(21);
+  const int64_t b = 3, c = 64, h = 12, w = 16, src_h = 20, src_w = 26;
+  const torch::Tensor ref = torch::randn({b, c, h, w});
+  const torch::Tensor src = torch::randn({b, c, src_h, src_w});
+  const EpipolarSegment seg = RandomSegments(b, h, w);
+  const SegmentCorrelation aten(ref, src, seg, /*levels=*/3, /*samples=*/9,
+                                CorrelationImpl::kAtenOps);
   torch::NoGradGuard no_grad;
   const SegmentCorrelation fused(ref, src, seg, /*levels=*/3, /*samples=*/9);
   ASSERT_EQ(fused.length(), aten.length());
@@ -294,6 +301,39 @@ TEST(SegmentCorrelation, FusedInferenceVolumeEqualsAtenVolume) {
   EXPECT_LT((fused.Lookup(match_xy).cost - aten.Lookup(match_xy).cost).abs().max().item<float>(),
             1e-5f);
   EXPECT_LT((fused.BestMatch().eflow - aten.BestMatch().eflow).abs().max().item<float>(), 1e-3f);
+}
+
+// Training builds the volume with the fused pass as an autograd node: the
+// same volume as the ATen ops, and the same gradients w.r.t. both feature
+// maps (the gradient weights every sample differently).
+TEST(SegmentCorrelation, FusedTrainingVolumeGradientsEqualAtenVolume) {
+  torch::manual_seed(22);
+  const int64_t b = 3, c = 64, h = 12, w = 16, src_h = 20, src_w = 26;
+  const torch::Tensor ref_values = torch::randn({b, c, h, w});
+  const torch::Tensor src_values = torch::randn({b, c, src_h, src_w});
+  const EpipolarSegment seg = RandomSegments(b, h, w);
+  struct Result {
+    torch::Tensor volume, ref_grad, src_grad;
+  };
+  torch::Tensor weights;
+  const auto run = [&](CorrelationImpl impl) {
+    torch::Tensor ref = ref_values.clone().requires_grad_(true);
+    torch::Tensor src = src_values.clone().requires_grad_(true);
+    const SegmentCorrelation volume(ref, src, seg, /*levels=*/3, /*samples=*/9, impl);
+    if (!weights.defined()) weights = torch::randn(volume.volume().sizes());
+    (volume.volume() * weights).sum().backward();
+    return Result{volume.volume().detach(), ref.grad(), src.grad()};
+  };
+  const Result aten = run(CorrelationImpl::kAtenOps);
+  const Result fused = run(CorrelationImpl::kAuto);
+  ASSERT_EQ(fused.volume.sizes(), aten.volume.sizes());
+  EXPECT_LT((fused.volume - aten.volume).abs().max().item<float>(), 1e-5f);
+  const auto relative = [](const torch::Tensor& a, const torch::Tensor& b) {
+    return ((a - b).abs().max() / b.abs().max()).item<float>();
+  };
+  EXPECT_GT(aten.src_grad.abs().max().item<float>(), 0.01f);  // not a comparison of zeros
+  EXPECT_LT(relative(fused.ref_grad, aten.ref_grad), 1e-5f);
+  EXPECT_LT(relative(fused.src_grad, aten.src_grad), 1e-5f);
 }
 
 TEST(SegmentCorrelation, LookupInterpolatesAlongTheSegment) {
