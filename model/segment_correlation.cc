@@ -40,8 +40,9 @@ torch::Tensor Interpolate1d(const torch::Tensor& vol, const torch::Tensor& u) {
   return read(i0) * (1.0 - frac) + read(i1) * frac;
 }
 
-// The level-0 volume [B,L,h,w] with ATen ops (autograd, any device),
-// kChunk samples at a time; eflows [B,L,h,w] the samples' E-flows.
+// The level-0 volume [B,L,h,w] with ATen ops (autograd w.r.t. everything,
+// any device: a GPU, float64, CorrelationImpl::kAtenOps), kChunk samples at
+// a time; eflows [B,L,h,w] the samples' E-flows.
 torch::Tensor AtenVolume(const torch::Tensor& ref_features, const torch::Tensor& src_features,
                          const EpipolarSegment& segment, const torch::Tensor& eflows) {
   const int64_t batch = src_features.size(0), channels = src_features.size(1);
