@@ -109,6 +109,19 @@ bool IsCpuFloat(const torch::Tensor& t) {
   return t.defined() && t.device().is_cpu() && t.scalar_type() == torch::kFloat32;
 }
 
+// A reference pixel's samples on one level, in level-l pixels: the centre
+// (match + 0.5) / 2^l - 0.5 and the line direction; sample k sits at
+// centre + (k - (samples-1)/2) * dir, the ATen path's arithmetic in the same
+// order (correlation.h).
+struct LevelLine {
+  float cx, cy, dx, dy;
+  void At(int64_t k, float half_span, float* x, float* y) const {
+    const float offset = static_cast<float>(k) - half_span;
+    *x = cx + offset * dx;
+    *y = cy + offset * dy;
+  }
+};
+
 // The checked inputs of a lookup, as raw pointers for the passes.
 struct Problem {
   std::vector<Level> levels;
@@ -126,17 +139,13 @@ struct Problem {
     const float* p = ref + b * ref_stride[0] + i * ref_stride[2] + j * ref_stride[3];
     for (int64_t c = 0; c < channels; ++c) out[c] = p[c * ref_stride[1]];
   }
-  // Sample k of level l for reference pixel `pixel` (i * w + j) of pair b,
-  // in level-l pixels: the ATen path's arithmetic, in the same order
-  // (correlation.h).
-  void SamplePosition(int64_t b, int64_t pixel, size_t l, int64_t k, float* x, float* y) const {
+  // Reference pixel `pixel` (i * w + j) of pair b on level l: the line its
+  // samples lie on, computed once for all of them.
+  LevelLine Line(int64_t b, int64_t pixel, size_t l) const {
     const int64_t x_index = (b * 2) * h * w + pixel, y_index = x_index + h * w;
     const float scale = static_cast<float>(int64_t{1} << l);
-    const float cx = (match_p[x_index] + 0.5f) / scale - 0.5f;
-    const float cy = (match_p[y_index] + 0.5f) / scale - 0.5f;
-    const float offset = static_cast<float>(k) - half_span();
-    *x = cx + offset * dir_p[x_index];
-    *y = cy + offset * dir_p[y_index];
+    return {(match_p[x_index] + 0.5f) / scale - 0.5f, (match_p[y_index] + 0.5f) / scale - 0.5f,
+            dir_p[x_index], dir_p[y_index]};
   }
 };
 
@@ -180,6 +189,7 @@ torch::Tensor LookupPass(const Problem& p, const torch::TensorOptions& options) 
   float* out_p = out.data_ptr<float>();
   const std::vector<float> zeros(static_cast<size_t>(p.channels), 0.0f);
   const float channel_count = static_cast<float>(p.channels);
+  const float half_span = p.half_span();
   // One task per image row of one pair: rows are independent.
   at::parallel_for(0, p.batch * p.h, 1, [&](int64_t begin, int64_t end) {
     std::vector<float> ref(static_cast<size_t>(p.channels));
@@ -191,9 +201,10 @@ torch::Tensor LookupPass(const Problem& p, const torch::TensorOptions& options) 
         for (size_t l = 0; l < p.levels.size(); ++l) {
           const Level& level = p.levels[l];
           const float* item = level.data + b * level.item_stride;
+          const LevelLine line = p.Line(b, pixel, l);
           for (int64_t k = 0; k < p.samples; ++k) {
             float x = 0.0f, y = 0.0f;
-            p.SamplePosition(b, pixel, l, k, &x, &y);
+            line.At(k, half_span, &x, &y);
             const float value =
                 SampleDot(level, item, ref.data(), zeros.data(), x, y, p.channels);
             out_p[(b * outputs + static_cast<int64_t>(l) * p.samples + k) * plane + pixel] =
@@ -231,6 +242,7 @@ LookupGradients LookupGradientPass(const Problem& p, const torch::Tensor& grad_c
   const int64_t outputs = p.outputs(), plane = p.h * p.w;
   const std::vector<float> zeros(static_cast<size_t>(p.channels), 0.0f);
   const float channel_count = static_cast<float>(p.channels);
+  const float half_span = p.half_span();
   at::parallel_for(0, p.batch, 1, [&](int64_t begin, int64_t end) {
     std::vector<float> ref(static_cast<size_t>(p.channels));
     for (int64_t b = begin; b < end; ++b) {
@@ -242,13 +254,14 @@ LookupGradients LookupGradientPass(const Problem& p, const torch::Tensor& grad_c
           const Level& level = p.levels[l];
           const float* item = level.data + b * level.item_stride;
           float* grad_item = grad_levels[l] + b * level.item_stride;
+          const LevelLine line = p.Line(b, pixel, l);
           for (int64_t k = 0; k < p.samples; ++k) {
             const float g =
                 grad_p[(b * outputs + static_cast<int64_t>(l) * p.samples + k) * plane + pixel] /
                 channel_count;
             if (g == 0.0f) continue;
             float x = 0.0f, y = 0.0f;
-            p.SamplePosition(b, pixel, l, k, &x, &y);
+            line.At(k, half_span, &x, &y);
             Footprint f;
             if (!BilinearFootprint(level, x, y, p.channels, &f)) continue;
             const auto corner = [&](int c) {
