@@ -30,7 +30,24 @@ cat "$work/run.out"
 out=$work/out
 grep -q "1 photos from" "$work/run.out" || fail "photos: motorcycle_* not left out, or the ramp not used"
 grep -q -- "--texture_dir" "$out/train.log" "$out/summary.md" || fail "photos not passed to training"
-grep -q "stopping after step [0-9]*: --max_minutes reached" "$out/train.log" || fail "no --max_minutes stop in the log"
+# The probe sized the run: the schedule line names the steps, and training
+# ran that schedule (its step lines count to the probed total, with the rate
+# halving every quarter) or stopped at the minutes left.
+schedule=$(grep -o "schedule: .*" "$work/run.out") || fail "no schedule line"
+total=$(sed 's/.* s\/step probed, \([0-9]*\) steps,.*/\1/' <<< "$schedule")
+halve=$(sed 's/.*halved every \([0-9]*\),.*/\1/' <<< "$schedule")
+[[ "$total" =~ ^[0-9]+$ && "$total" -ge 16 ]] || fail "schedule: $schedule"
+[ "$halve" = $(( (total + 3) / 4 )) ] || fail "the rate does not halve every quarter of the run: $schedule"
+grep -q "^step [0-9]*/$total " "$out/train.log" || fail "training did not run the probed schedule"
+grep -q -- "--lr_halve_every $halve" "$out/summary.md" || fail "summary.md lacks the halving"
+[ ! -e "$work/scratch/probe" ] || fail "the probe's scratch folder was left behind"
+# The selection: the kept checkpoints of the second half (4 of 8) and the last
+# one, each scored, and the chosen one is the best < 2 % of the table.
+rows=$(grep -c '^| [0-9]' "$out/selection.md") || true
+[ "$rows" -ge 2 ] || fail "selection.md scored $rows checkpoints: $(cat "$out/selection.md")"
+chosen=$(grep -o "chose step [0-9]*" "$work/run.out" | grep -o '[0-9]*$') || fail "no chosen step"
+grep -q "^| $chosen | [0-9.]* | \*\*" "$out/selection.md" || fail "step $chosen is not the best of selection.md"
+grep -q "^## New weights (step $chosen)" "$out/summary.md" || fail "summary.md does not name step $chosen"
 [ -s "$out/dispmvs_small_v2.safetensors" ] || fail "no weights"
 for table in eval_new eval_init; do
   for x in 1.000 3.000 10.00 none; do
