@@ -1,0 +1,32 @@
+#pragma once
+// The fixed validation set of a run (generated scenes at full difficulty,
+// from TrainOptions::validation_seed_base on) and the network's numbers on
+// it: the depth metrics per depth-range widening and the coarse matching
+// accuracy. Apart from the loop (trainer.cc) because it has two callers: the
+// validations inside a run and EvaluateWeights' table.
+//
+// Internal to train/: the public interface is trainer.h.
+
+#include <cstdint>
+#include <vector>
+
+#include <torch/torch.h>
+
+#include "model/dispmvs_net.h"
+#include "synth/generator.h"
+#include "train/trainer.h"
+
+namespace dispmvs::train::internal {
+
+// A CPU generator seeded with `seed`: the network's random initialisation in a forward pass.
+torch::Generator CpuGenerator(uint64_t seed);
+
+// The validation scenes of `options` (its size, view count, scene count and seed base).
+std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, torch::Device device);
+
+// One table row per widening; the coarse accuracy measured once for all.
+std::vector<WideningResult> Validate(model::DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                                     const TrainOptions& options, const std::vector<double>& widenings,
+                                     bool look_from_sources);
+
+}  // namespace dispmvs::train::internal
