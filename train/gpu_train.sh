@@ -222,9 +222,9 @@ log "scoring $(ls "$selection" | wc -l) checkpoints on the selection set"
 "$root/train/score_checkpoints.sh" "$build" "$selection" --device "$device" --precision fp32 \
   --height "$eval_height" --width "$eval_width" --val_scenes "$val_scenes" > "$out/selection.md" 2> "$work/selection.log" ||
   { cat "$work/selection.log"; echo "error: scoring the checkpoints failed" >&2; exit 1; }
-best_step=$(awk -F'\t' '{ line = $3; sub(/.*<2%: /, "", line); sub(/ .*/, "", line)
-                          if (n++ == 0 || line + 0 > best + 0) { best = line; step = $1 } } END { print step }' \
-                 "$selection/selection.txt")
+# score_checkpoints.sh marks the best < 2 % in bold: its choice is the one taken.
+best_step=$(sed -n 's/^| \([0-9]*\) | [0-9.]* | \*\*.*/\1/p' "$out/selection.md" | head -1)
+[ -n "$best_step" ] || { cat "$out/selection.md"; echo "error: no best row in the selection table" >&2; exit 1; }
 best=""
 for f in "$selection"/*.safetensors; do
   name=$(basename "$f" .safetensors)
