@@ -10,6 +10,7 @@ packages=(
   libtorch-dev            # the network (LibTorch 1.13, CPU)
   libeigen3-dev           # geometry in colmap_io and test references
   libopencv-dev           # image I/O and resizing
+  libtiff-dev libwebp-dev # image headers read before decoding (colmap_io/image_header.h)
   libboost-program-options-dev
   libnanoflann-dev         # k-d trees of the point-cloud evaluation (eval/)
   libgtest-dev libgmock-dev

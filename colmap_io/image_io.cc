@@ -3,13 +3,17 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <fstream>
+#include <limits>
 #include <string>
 #include <system_error>
 
+#include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "colmap_io/error.h"
+#include "colmap_io/image_header.h"
 
 namespace dispmvs::colmap_io {
 namespace {
@@ -25,22 +29,96 @@ void CheckSize(const cv::Size& size, const char* what) {
   }
 }
 
+// The whole file, refused unread when it is larger than `max_bytes`.
+std::string ReadFileBytes(const std::filesystem::path& path, uint64_t max_bytes) {
+  std::error_code error;
+  const uint64_t size = std::filesystem::file_size(path, error);
+  if (error) throw IoError(path.string(), "cannot read image file: " + error.message());
+  if (size > max_bytes) {
+    throw IoError(path.string(), "image file of " + std::to_string(size) +
+                                     " bytes is larger than any image of its allowed size (" +
+                                     std::to_string(max_bytes) + " bytes at most)");
+  }
+  std::ifstream in(path, std::ios::binary);
+  std::string bytes(size, '\0');
+  if (!in.read(bytes.data(), static_cast<std::streamsize>(size))) {
+    throw IoError(path.string(), "cannot read image file");
+  }
+  return bytes;
+}
+
+// Bytes allowed for `pixels` pixels: 16-bit RGBA is 8 bytes per pixel; twice
+// that leaves room for whatever a format stores beside the pixels, and
+// 64 MiB for metadata (EXIF thumbnails, XMP) of small images.
+uint64_t AllowedBytes(int64_t pixels) { return 16 * static_cast<uint64_t>(pixels) + (64u << 20); }
+
 }  // namespace
 
-cv::Mat ReadImageRgb(const std::filesystem::path& path) {
+cv::Mat ReadImageRgb(const std::filesystem::path& path, const ImageLimits& limits) {
   std::error_code error;
   if (!std::filesystem::is_regular_file(path, error)) {
     throw IoError(path.string(), "image file does not exist");
   }
+  const int64_t allowed_pixels =
+      limits.expected_size
+          ? static_cast<int64_t>(limits.expected_size->width) * limits.expected_size->height
+          : limits.max_pixels;
+  // OpenCV takes the encoded bytes as one row of int columns.
+  const std::string bytes = ReadFileBytes(
+      path, std::min<uint64_t>(AllowedBytes(allowed_pixels), std::numeric_limits<int>::max()));
+  const ImageHeader header = ReadImageHeader(bytes, path.string());
+  const cv::Size size(header.width, header.height);
+  if (limits.expected_size && size != *limits.expected_size) {
+    throw IoError(path.string(), "image is " + SizeToString(size) + " but " +
+                                     limits.expected_size_of + " is " +
+                                     SizeToString(*limits.expected_size) +
+                                     (limits.size_mismatch_hint.empty()
+                                          ? ""
+                                          : " (" + limits.size_mismatch_hint + ")"));
+  }
+  if (static_cast<int64_t>(header.width) * header.height > allowed_pixels) {
+    throw IoError(path.string(), "image of " + SizeToString(size) + " is larger than " +
+                                     std::to_string(allowed_pixels) + " pixels");
+  }
+  // Against the image's own size: its pixels may well fit the limits while a
+  // damaged header makes the decoder's buffer a thousand times larger.
+  if (header.decoder_buffer_bytes >
+      AllowedBytes(static_cast<int64_t>(header.width) * header.height)) {
+    throw IoError(path.string(),
+                  std::string(ImageFormatName(header.format)) + " header asks the decoder for a " +
+                      std::to_string(header.decoder_buffer_bytes >> 20) +
+                      " MiB buffer for a " + SizeToString(size) +
+                      " image (damaged strip or tile sizes)");
+  }
+
+  // OpenCV logs a decoder's failure to stderr; the IoError below says it
+  // once, with the file's name, in the program's own words. Process-wide:
+  // nothing else in the project relies on OpenCV's log.
+  static const bool silenced = [] {
+    cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
+    return true;
+  }();
+  (void)silenced;
   // IMREAD_UNCHANGED keeps 16-bit data and the channel count as stored
   // (IMREAD_COLOR would silently reduce 16-bit images to 8 bits).
+  const cv::Mat encoded(1, static_cast<int>(bytes.size()), CV_8UC1,
+                        const_cast<char*>(bytes.data()));
   cv::Mat raw;
   try {
-    raw = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+    raw = cv::imdecode(encoded, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
-    throw IoError(path.string(), std::string("cannot decode image: ") + e.what());
+    throw IoError(path.string(), std::string("cannot decode ") + ImageFormatName(header.format) +
+                                     " image: " + e.what());
   }
-  if (raw.empty()) throw IoError(path.string(), "cannot decode image");
+  if (raw.empty()) {
+    throw IoError(path.string(), std::string("cannot decode ") + ImageFormatName(header.format) +
+                                     " image (damaged or truncated file)");
+  }
+  if (raw.size() != size) {  // the decoder and the header disagree: trust neither
+    throw IoError(path.string(), std::string(ImageFormatName(header.format)) + " header says " +
+                                     SizeToString(size) + " but the decoder read " +
+                                     SizeToString(raw.size()) + " (damaged file)");
+  }
 
   double scale = 0.0;
   switch (raw.depth()) {
@@ -115,16 +193,17 @@ ResizedImage ResizeToMaxImageSize(const cv::Mat& image, const Eigen::Matrix3d& K
 ResizedImage ReadImageForCamera(const std::filesystem::path& path, const Camera& camera,
                                 int max_image_size) {
   const Eigen::Matrix3d K = camera.CalibrationMatrix();
-  const cv::Mat image = ReadImageRgb(path);
-  if (static_cast<uint64_t>(image.cols) != camera.width ||
-      static_cast<uint64_t>(image.rows) != camera.height) {
-    throw IoError(path.string(),
-                  "image is " + SizeToString(image.size()) + " but camera " +
-                      std::to_string(camera.camera_id) + " is " +
-                      std::to_string(camera.width) + "x" + std::to_string(camera.height) +
-                      " (dense MVS needs the undistorted images)");
+  ImageLimits limits;
+  if (camera.width < 1 || camera.height < 1 || camera.width > (1u << 24) ||
+      camera.height > (1u << 24)) {
+    throw IoError(path.string(), "camera " + std::to_string(camera.camera_id) + " has size " +
+                                     std::to_string(camera.width) + "x" +
+                                     std::to_string(camera.height) + ", no image can match it");
   }
-  return ResizeToMaxImageSize(image, K, max_image_size);
+  limits.expected_size = cv::Size(static_cast<int>(camera.width), static_cast<int>(camera.height));
+  limits.expected_size_of = "camera " + std::to_string(camera.camera_id);
+  limits.size_mismatch_hint = "dense MVS needs the undistorted images";
+  return ResizeToMaxImageSize(ReadImageRgb(path, limits), K, max_image_size);
 }
 
 ResizedImage ResampleToDenseIndexGrid(const cv::Mat& image, const Eigen::Matrix3d& K,

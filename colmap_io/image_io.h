@@ -12,7 +12,10 @@
 // grid_sample with align_corners=true over index grids) needs the principal
 // point shifted by -0.5: see ToPixelIndexConvention().
 
+#include <cstdint>
 #include <filesystem>
+#include <optional>
+#include <string>
 
 #include <Eigen/Core>
 #include <opencv2/core.hpp>
@@ -21,12 +24,35 @@
 
 namespace dispmvs::colmap_io {
 
-// Reads an image with OpenCV (any format imread handles) and returns it as
-// CV_32FC3 in RGB channel order with values in [0, 1]: 8-bit data is divided
-// by 255, 16-bit data by 65535; grey images are replicated to three channels
-// and an alpha channel is dropped. Throws IoError naming `path` when the file
-// is missing, cannot be decoded, or has another bit depth or channel count.
-cv::Mat ReadImageRgb(const std::filesystem::path& path);
+// What an image may be before it is decoded (see image_header.h for why the
+// header is read first).
+struct ImageLimits {
+  // The size the image must have (the camera's), checked on the header before
+  // any pixel is allocated; std::nullopt: any size up to max_pixels.
+  std::optional<cv::Size> expected_size;
+  // What expected_size is, for the message (e.g. "camera 3").
+  std::string expected_size_of = "the expected size";
+  // Said in parentheses after a wrong size, when not empty.
+  std::string size_mismatch_hint;
+  // Refused above this many pixels when no size is expected (2^28: 16384^2;
+  // OpenCV's own limit is 2^30).
+  int64_t max_pixels = int64_t{1} << 28;
+};
+
+// Reads an image and returns it as CV_32FC3 in RGB channel order with values
+// in [0, 1]: 8-bit data is divided by 255, 16-bit data by 65535; grey images
+// are replicated to three channels and an alpha channel is dropped.
+//
+// The file is read into memory, its format and size are taken from its header
+// (ReadImageHeader: PNG, JPEG, TIFF, BMP, PNM or WebP, nothing else reaches a
+// decoder), checked against `limits` together with the file's size and the
+// decoder's own buffer, and only then decoded by that format's OpenCV decoder
+// (cv::imdecode). Memory stays bounded by the limits: at most 16 bytes per
+// allowed pixel plus 64 MiB for the file, and the same for a TIFF's strip or
+// tile buffer. Throws IoError naming `path` and the reason when the file is
+// missing, of another format, damaged or truncated, of another size than
+// expected, too large, or of another bit depth or channel count.
+cv::Mat ReadImageRgb(const std::filesystem::path& path, const ImageLimits& limits = {});
 
 // COLMAP's max_image_size rule (mvs::Image::Downsize): unchanged when both
 // sides are <= max_image_size or when max_image_size <= 0 (COLMAP's -1 means
@@ -56,10 +82,11 @@ struct ResizedImage {
 ResizedImage ResizeToMaxImageSize(const cv::Mat& image, const Eigen::Matrix3d& K,
                                   int max_image_size);
 
-// ReadImageRgb + checks that the file's size equals the camera's (dense MVS
-// needs undistorted images matching their camera: IoError naming `path`
-// otherwise) + ResizeToMaxImageSize with camera.CalibrationMatrix() (which
-// throws std::invalid_argument for non-pinhole cameras).
+// ReadImageRgb with the camera's size as the expected size (dense MVS needs
+// undistorted images matching their camera: IoError naming `path` otherwise,
+// before the pixels are decoded) + ResizeToMaxImageSize with
+// camera.CalibrationMatrix() (which throws std::invalid_argument for
+// non-pinhole cameras).
 ResizedImage ReadImageForCamera(const std::filesystem::path& path, const Camera& camera,
                                 int max_image_size);
 

@@ -23,6 +23,12 @@ fs::path ViewRecordPath(const Workspace& workspace, const std::string& image_nam
 
 void WriteViewRecord(const fs::path& path, const ViewRecord& record) {
   WriteFileAtomically(path, [&](std::ostream& out) {
+    if (!record.failure.empty()) {  // one line: line breaks become spaces
+      std::string reason = record.failure;
+      for (char& c : reason) c = (c == '\n' || c == '\r') ? ' ' : c;
+      out << "failed " << reason << '\n';
+      return;
+    }
     out.precision(6);
     out << "seconds " << std::fixed << record.seconds << '\n'
         << "size " << record.width << 'x' << record.height << '\n'
@@ -41,6 +47,10 @@ std::optional<ViewRecord> ReadViewRecord(const fs::path& path) {
     std::istringstream fields(line);
     std::string key;
     fields >> key;
+    if (key == "failed" && line.size() > 7) {
+      record.failure = line.substr(7);
+      return record;
+    }
     if (key == "seconds") {
       seconds = static_cast<bool>(fields >> record.seconds) && std::isfinite(record.seconds) &&
                 record.seconds >= 0;

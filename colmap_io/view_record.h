@@ -11,6 +11,11 @@
 //   sources 4         source views used
 //   device cpu        where the network ran
 //
+// or, for a view that failed (no maps written), the one line
+//   failed REASON     the error, naming the file at fault
+// so that the report and dispmvs_eval can say why a view has no map. A later
+// run that computes the view replaces it.
+//
 // The file is written atomically after the maps; a view without one (computed
 // before records existed, or killed between its maps and its record) simply
 // has no time in the report. The times differ from run to run, so tests that
@@ -29,6 +34,8 @@ struct ViewRecord {
   int width = 0, height = 0;
   int num_sources = 0;
   std::string device;
+  // Not empty: the view failed for this reason and the other fields are unset.
+  std::string failure;
 };
 
 // WS/stereo/dispmvs_records, the folder of every view's record.

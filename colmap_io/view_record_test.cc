@@ -44,6 +44,23 @@ TEST(ViewRecordTest, WritesTheDocumentedLinesAndReadsThemBack) {
   EXPECT_EQ(back->device, "cuda:1");
 }
 
+TEST(ViewRecordTest, AFailedViewIsOneLineWithItsReason) {
+  TempDir dir;
+  const fs::path path = dir.path() / "failed.txt";
+  ViewRecord record;
+  record.seconds = 3;  // ignored: a failed view has only its reason
+  record.failure = "ws/images/a.png: JPEG file is truncated\nsecond line";
+  WriteViewRecord(path, record);
+  EXPECT_EQ(ReadFileBytes(path), "failed ws/images/a.png: JPEG file is truncated second line\n");
+  const auto back = ReadViewRecord(path);
+  ASSERT_TRUE(back.has_value());
+  EXPECT_EQ(back->failure, "ws/images/a.png: JPEG file is truncated second line");
+  EXPECT_EQ(back->seconds, 0);
+  // "failed" without a reason is not a record.
+  WriteFileBytes(path, "failed\n");
+  EXPECT_FALSE(ReadViewRecord(path).has_value());
+}
+
 TEST(ViewRecordTest, AbsentOrDamagedRecordsReadAsNone) {
   TempDir dir;
   EXPECT_FALSE(ReadViewRecord(dir.path() / "missing.txt").has_value());

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <filesystem>
 #include <optional>
+#include <set>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -102,6 +103,7 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       << options.estimator.model_path << '\n'
       << std::flush;
   const auto compute_start = Clock::now();
+  std::set<std::string> unreadable_sources;  // whose reason the log has given
   for (std::size_t i = 0; i < todo.size(); ++i) {
     const StereoProblem& problem = *todo[i];
     const image_t reference = problem.reference_image_id;
@@ -138,19 +140,32 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       // None without sparse points or --depth_min/--depth_max: fine for
       // model v2 weights (checked above for the others).
       const std::optional<DepthRange> hint = plan.HintFor(reference);
-      const std::vector<ProblemView> views =
-          LoadProblemViews(workspace, plan, problem, options.max_image_size);
-      const DepthEstimate estimate =
-          estimator.Estimate(views, hint, ViewSeed(options.seed, reference));
-      const DenseArray normal = fusion::NormalMapFromDepth(estimate.depth, views[0].K);
-      WriteMaps(paths, estimate.depth, normal, estimate.confidence);
+      ProblemViews loaded;
+      DepthEstimate estimate;
+      try {
+        loaded = LoadProblemViews(workspace, plan, problem, options.max_image_size);
+        estimate = estimator.Estimate(loaded.views, hint, ViewSeed(options.seed, reference));
+        WriteMaps(paths, estimate.depth, fusion::NormalMapFromDepth(estimate.depth, loaded.views[0].K),
+                  estimate.confidence);
+      } catch (const std::exception& error) {
+        // Still holding the claim: say why, for the report and dispmvs_eval.
+        // Best effort (the disk may be what failed); the error goes on.
+        ViewRecord failed;
+        failed.failure = error.what();
+        try {
+          WriteViewRecord(record_path, failed);
+        } catch (const std::exception&) {
+        }
+        throw;
+      }
+      const std::vector<ProblemView>& views = loaded.views;
       // For the run report; after the maps, so a complete view never waits
       // on it (a view killed in between just has no time in the report).
       ViewRecord record;
       record.seconds = SecondsSince(view_start);
       record.width = estimate.depth.width();
       record.height = estimate.depth.height();
-      record.num_sources = static_cast<int>(problem.source_image_ids.size());
+      record.num_sources = static_cast<int>(views.size()) - 1;
       record.device = options.estimator.device;
       std::string record_note;
       try {  // only the report needs it: not a reason to fail the view
@@ -166,6 +181,12 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
           << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << record_note;
       if (leftovers > 0) {
         log << " (" << leftovers << " temporary file(s) of an interrupted run removed)";
+      }
+      for (const ProblemViews::LeftOut& source : loaded.left_out) {
+        // The reason once per run; the views after only name the source.
+        log << "; source " << source.name << " left out: "
+            << (unreadable_sources.insert(source.name).second ? source.reason
+                                                               : "unreadable, see above");
       }
       log << '\n' << std::flush;
     } catch (const std::exception& error) {

@@ -76,16 +76,28 @@ ResizedImage ReadFullImage(const Workspace& workspace, const DensePlan& plan, im
                             /*max_image_size=*/-1);
 }
 
-std::vector<ProblemView> LoadProblemViews(const Workspace& workspace, const DensePlan& plan,
-                                          const StereoProblem& problem, int max_image_size) {
+ProblemViews LoadProblemViews(const Workspace& workspace, const DensePlan& plan,
+                              const StereoProblem& problem, int max_image_size) {
   const ResizedImage reference = ReadFullImage(workspace, plan, problem.reference_image_id);
   const cv::Size size = ComputeResizedSize(reference.image.size(), max_image_size);
-  std::vector<ProblemView> views;
-  views.push_back(MakeView(reference, plan.ImageOf(problem.reference_image_id), size));
+  ProblemViews loaded;
+  loaded.views.push_back(MakeView(reference, plan.ImageOf(problem.reference_image_id), size));
   for (image_t source : problem.source_image_ids) {
-    views.push_back(MakeView(ReadFullImage(workspace, plan, source), plan.ImageOf(source), size));
+    try {
+      loaded.views.push_back(
+          MakeView(ReadFullImage(workspace, plan, source), plan.ImageOf(source), size));
+    } catch (const IoError& error) {
+      loaded.left_out.push_back({plan.ImageOf(source).name, error.what()});
+    }
   }
-  return views;
+  if (loaded.views.size() == 1) {
+    std::string reasons;
+    for (const ProblemViews::LeftOut& source : loaded.left_out) reasons += "; " + source.reason;
+    throw IoError(workspace.ImagePath(plan.ImageOf(problem.reference_image_id).name).string(),
+                  "none of its " + std::to_string(problem.source_image_ids.size()) +
+                      " source image(s) can be read" + reasons);
+  }
+  return loaded;
 }
 
 fusion::DepthView LoadDepthView(const Workspace& workspace, const DensePlan& plan,

@@ -53,13 +53,24 @@ void WriteMaps(const MapPaths& paths, const colmap_io::DenseArray& depth,
 colmap_io::ResizedImage ReadFullImage(const colmap_io::Workspace& workspace,
                                       const DensePlan& plan, colmap_io::image_t image_id);
 
+struct ProblemViews {
+  std::vector<ProblemView> views;  // the reference first, then the sources read
+  struct LeftOut {
+    std::string name;    // the source image's
+    std::string reason;  // the IoError's message, naming the file
+  };
+  std::vector<LeftOut> left_out;  // sources that could not be read: the view runs without them
+};
+
 // The reference at the --max_image_size size (<= 0: full size), its sources
 // brought to the same size (per-axis scaled intrinsics keep them exact), each
-// on COLMAP's dense index grid.
-std::vector<ProblemView> LoadProblemViews(const colmap_io::Workspace& workspace,
-                                          const DensePlan& plan,
-                                          const colmap_io::StereoProblem& problem,
-                                          int max_image_size);
+// on COLMAP's dense index grid. A source image that cannot be read (missing,
+// damaged, of the wrong size) is left out and listed, as the geometric pass
+// and fusion leave out an unreadable map: one bad file costs its own view,
+// not every view that would have used it. Throws IoError when the reference
+// cannot be read, or when no source can (naming each and why).
+ProblemViews LoadProblemViews(const colmap_io::Workspace& workspace, const DensePlan& plan,
+                              const colmap_io::StereoProblem& problem, int max_image_size);
 
 // The depth and (when present) confidence maps of `type` with the camera
 // geometry of the map's own size; throws IoError on unreadable or

@@ -13,6 +13,7 @@
 
 #include "colmap_io/atomic_file.h"
 #include "colmap_io/dense_array.h"
+#include "colmap_io/error.h"
 #include "colmap_io/image_io.h"
 #include "colmap_io/ply.h"
 #include "colmap_io/view_record.h"
@@ -243,7 +244,7 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
   double slowest_seconds = -1;
   for (const auto* image : images) {
     records.push_back(colmap_io::ReadViewRecord(colmap_io::ViewRecordPath(workspace, image->name)));
-    if (!records.back()) continue;
+    if (!records.back() || !records.back()->failure.empty()) continue;  // failed: no time
     ++timed;
     total_seconds += records.back()->seconds;
     if (records.back()->seconds > slowest_seconds) {
@@ -298,17 +299,31 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
       }
     }
     html << "<tr><td class=\"name\">" << Escape(image->name);
-    const fs::path image_path = workspace.ImagePath(image->name);
-    // Checked first: OpenCV warns on stderr about a file it cannot open.
-    const cv::Mat picture = fs::is_regular_file(image_path)
-                                ? cv::imread(image_path.string(), cv::IMREAD_COLOR)
-                                : cv::Mat();
+    // Through the project's reader (its size checked against the camera's
+    // before decoding, only the accepted formats decoded): a damaged file
+    // must not end the report, nor the run that writes it.
+    cv::Mat picture;
+    try {
+      const colmap_io::Camera& camera = model.cameras.at(image->camera_id);
+      colmap_io::ImageLimits limits;
+      limits.expected_size =
+          cv::Size(static_cast<int>(camera.width), static_cast<int>(camera.height));
+      limits.expected_size_of = "its camera";
+      cv::Mat rgb;
+      colmap_io::ReadImageRgb(workspace.ImagePath(image->name), limits)
+          .convertTo(rgb, CV_8UC3, 255.0);
+      cv::cvtColor(rgb, picture, cv::COLOR_RGB2BGR);
+    } catch (const colmap_io::IoError&) {
+      // Shown as unreadable below; the run's own log says why.
+    }
     if (!picture.empty()) {
       page.Image(picture, width, image->name);
     } else {
       html << "<br>(image unreadable)";
     }
-    if (const auto& record = records[i]) {
+    if (const auto& record = records[i]; record && !record->failure.empty()) {
+      html << "<div class=\"bar\">FAILED: " << Escape(record->failure) << "</div>";
+    } else if (record) {
       html << "<div class=\"bar\">" << Seconds(record->seconds) << ", " << record->num_sources
            << " source(s), " << Escape(record->device) << "</div>";
     }

@@ -146,6 +146,26 @@ TEST_F(HtmlReportTest, TimePerViewAndInAllFromTheViewRecords) {
   EXPECT_EQ(html.find("9.00 s"), std::string::npos);
 }
 
+TEST_F(HtmlReportTest, AFailedViewShowsItsReasonAndADamagedImageIsNoPicture) {
+  const colmap_io::Workspace workspace(root_);
+  colmap_io::ViewRecord failed;
+  failed.failure = "ws/images/view_04.png: JPEG file is truncated <cut>";
+  colmap_io::WriteViewRecord(colmap_io::ViewRecordPath(workspace, "view_04.png"), failed);
+  // Not an image at all: the report goes on without its picture.
+  ::dispmvs::testing::WriteFileBytes(root_ / "images" / "view_04.png", "\x89PNG\r\n)\n");
+  const fs::path html_path = dir_.path() / "report.html";
+  const HtmlReportSummary summary = WriteHtmlReport(root_, html_path, HtmlReportOptions());
+  const std::string html = ::dispmvs::testing::ReadFileBytes(html_path);
+  const std::size_t row = html.find("<td class=\"name\">view_04.png");
+  ASSERT_NE(row, std::string::npos);
+  const std::string cells = html.substr(row, html.find("</tr>", row) - row);
+  EXPECT_NE(cells.find("(image unreadable)"), std::string::npos);
+  EXPECT_NE(cells.find("FAILED: ws/images/view_04.png: JPEG file is truncated &lt;cut&gt;"),
+            std::string::npos);
+  EXPECT_EQ(summary.embedded_images, 7 * 4 - 1);
+  EXPECT_NE(html.find("No view has a recorded time"), std::string::npos);  // a failure has none
+}
+
 TEST_F(HtmlReportTest, PatchMatchMapsAndTheCloudWhenPresent) {
   const colmap_io::Workspace workspace(root_);
   // PatchMatch's geometric map for one view, half covered.

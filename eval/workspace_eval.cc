@@ -11,6 +11,7 @@
 #include "colmap_io/dense_array.h"
 #include "colmap_io/error.h"
 #include "colmap_io/ply.h"
+#include "colmap_io/view_record.h"
 #include "eval/depth_png.h"
 
 namespace dispmvs::eval {
@@ -234,7 +235,18 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
   for (std::size_t t = 0; t < report->types.size(); ++t) {
     const std::string& type = report->types[t].type;
     const fs::path map_path = workspace.DepthMapPath(image.name, type);
-    if (!IsFile(map_path)) continue;
+    if (!IsFile(map_path)) {
+      // dispmvs_colmap's maps (dispmvs.*) are missing where its run failed:
+      // its record says why.
+      if (type.rfind("dispmvs.", 0) == 0) {
+        const std::optional<colmap_io::ViewRecord> record =
+            colmap_io::ReadViewRecord(colmap_io::ViewRecordPath(workspace, image.name));
+        if (record && !record->failure.empty()) {
+          report->types[t].failed_views.push_back({image.name, record->failure});
+        }
+      }
+      continue;
+    }
     const colmap_io::DenseArray map = ReadDepthMap(map_path, "depth map");
     cv::Mat rel_error;
     DepthMetricSums view_sums;

@@ -73,6 +73,12 @@ struct TypeDepthResult {
   std::string type;
   std::vector<ViewDepthResult> views;  // images with GT and a map of this type
   int64_t maps_without_gt = 0;         // maps of images without GT (not scored)
+  // Images with GT but no map of this type whose dispmvs_colmap run failed,
+  // with the reason its view record (colmap_io/view_record.h) gives.
+  struct FailedView {
+    std::string image_name, reason;
+  };
+  std::vector<FailedView> failed_views;
   DepthMetrics overall;                // pixel-weighted over `views`
   // The pixel-weighted disparity numbers of the views that have a rectified
   // partner (not applicable when none has).

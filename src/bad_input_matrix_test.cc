@@ -13,6 +13,7 @@
 
 #include <csignal>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -50,6 +51,8 @@ enum class Program { kColmap, kEval };
 enum class Written {
   kNothing,        // no file created or changed anywhere
   kOthersOnly,     // `failed_views` have no maps; every written file is complete
+  kAllOthers,      // as kOthersOnly, and every other view has all its maps and
+                   // the cloud was fused: one bad file costs its own view only
 };
 
 struct BadInputCase {
@@ -66,7 +69,12 @@ struct BadInputCase {
   // > 0: the most bytes any file may have (RLIMIT_FSIZE), a full disk.
   rlim_t file_size_limit = 0;
   bool needs_non_root = false;  // permissions do not stop root
+  std::string also_says = "";   // a line of standard output must contain this
 };
+
+const std::string kUnknownFormat =
+    "not an image in a supported format (PNG, JPEG, TIFF, BMP, PNM, WebP): unknown or damaged "
+    "file signature";
 
 // --- ways to break a workspace ------------------------------------------
 
@@ -76,6 +84,19 @@ void Truncate(const fs::path& path, double keep) {
 }
 
 void Overwrite(const fs::path& path, const std::string& bytes) { WriteFileBytes(path, bytes); }
+
+// The inputs the image fuzzer found (tests/fuzz/regressions/image_fuzzer).
+std::string FuzzFinding(const std::string& name) {
+  return ReadFileBytes(fs::path(DISPMVS_SOURCE_DIR) / "tests/fuzz/regressions/image_fuzzer" / name);
+}
+
+// `image` re-encoded as `extension` (".jpg", ".tif") under its own name, the
+// first `keep` of the file kept: a copy cut short.
+void ReencodeTruncated(const fs::path& image, const std::string& extension, double keep) {
+  std::vector<uchar> bytes;
+  ASSERT_TRUE(cv::imencode(extension, cv::imread(image.string()), bytes));
+  WriteFileBytes(image, std::string(bytes.begin(), bytes.begin() + static_cast<long>(bytes.size() * keep)));
+}
 
 // The sparse model rewritten as text (what COLMAP's model_converter
 // writes), so that single numbers can be edited.
@@ -240,10 +261,40 @@ std::vector<BadInputCase> Cases() {
        [](const fs::path& ws) { fs::remove(ws / "images" / "view_03.png"); }, fast,
        Written::kOthersOnly, {"view_03.png"}},
       {"image_unreadable", 1,
-       "photometric: [1/7] view_00.png (4 sources): FAILED: {WS}/images/view_00.png: cannot decode image",
+       "photometric: [1/7] view_00.png (4 sources): FAILED: {WS}/images/view_00.png: " + kUnknownFormat,
        Program::kColmap,
        [](const fs::path& ws) { Overwrite(ws / "images" / "view_00.png", "not a PNG"); }, fast,
-       Written::kOthersOnly, {"view_00.png"}},
+       Written::kAllOthers, {"view_00.png"}, 0, false,
+       "; source view_00.png left out: {WS}/images/view_00.png: " + kUnknownFormat},
+      // What made OpenCV hand the file to its DICOM decoder, which aborted
+      // the process (the fuzzer's finding).
+      {"image_dicom_lookalike", 1,
+       "photometric: [4/7] view_03.png (4 sources): FAILED: {WS}/images/view_03.png: " + kUnknownFormat,
+       Program::kColmap,
+       [](const fs::path& ws) {
+         Overwrite(ws / "images" / "view_03.png", FuzzFinding("image-gdcm-abort.bin"));
+       },
+       fast, Written::kAllOthers, {"view_03.png"}, 0, false,
+       "; source view_03.png left out: {WS}/images/view_03.png: " + kUnknownFormat},
+      // A 222-byte TIFF whose header made the decoder allocate 1 GB.
+      {"image_tiff_header_claims_1gb", 1,
+       "photometric: [4/7] view_03.png (4 sources): FAILED: {WS}/images/view_03.png: image is 16392x6 but camera 1 is 320x240 (dense MVS needs the undistorted images)",
+       Program::kColmap,
+       [](const fs::path& ws) {
+         Overwrite(ws / "images" / "view_03.png", FuzzFinding("image-tiff-1gb.bin"));
+       },
+       fast, Written::kAllOthers, {"view_03.png"}, 0, false,
+       "; source view_03.png left out: {WS}/images/view_03.png: image is 16392x6"},
+      {"image_jpeg_truncated", 1,
+       "photometric: [4/7] view_03.png (4 sources): FAILED: {WS}/images/view_03.png: JPEG file is truncated: it ends before its end-of-image marker",
+       Program::kColmap,
+       [](const fs::path& ws) { ReencodeTruncated(ws / "images" / "view_03.png", ".jpg", 0.6); },
+       fast, Written::kAllOthers, {"view_03.png"}},
+      {"image_tiff_truncated", 1,
+       "photometric: [4/7] view_03.png (4 sources): FAILED: {WS}/images/view_03.png: TIFF file is damaged or truncated: Can not read TIFF directory count",
+       Program::kColmap,
+       [](const fs::path& ws) { ReencodeTruncated(ws / "images" / "view_03.png", ".tif", 0.6); },
+       fast, Written::kAllOthers, {"view_03.png"}},
       {"image_size_disagrees_with_camera", 1,
        "photometric: [1/7] view_00.png (4 sources): FAILED: {WS}/images/view_00.png: image is 160x120 but camera 1 is 320x240 (dense MVS needs the undistorted images)",
        Program::kColmap,
@@ -253,7 +304,7 @@ std::vector<BadInputCase> Cases() {
          cv::resize(cv::imread(image.string()), resized, cv::Size(160, 120));
          cv::imwrite(image.string(), resized);
        },
-       fast, Written::kOthersOnly, {"view_00.png"}},
+       fast, Written::kAllOthers, {"view_00.png"}},
       // Configurations.
       {"patch_match_cfg_empty", 1,
        "error: {WS}/stereo/patch-match.cfg: names no reference image (an empty file?): list the references and their sources, or delete it to reconstruct every image with `__auto__` sources",
@@ -379,6 +430,20 @@ std::vector<BadInputCase> Cases() {
                                         "view_01.png.dispmvs.photometric.bin");
        },
        ""},
+      // A view dispmvs_colmap failed on: evaluation names it and why.
+      {"eval_view_failed_in_run", 1,
+       "warning: view_03.png has no dispmvs.photometric map: dispmvs_colmap failed on it: {WS}/images/view_03.png: " + kUnknownFormat,
+       Program::kEval,
+       [](const fs::path& ws) {
+         Overwrite(ws / "images" / "view_03.png", FuzzFinding("image-gdcm-abort.bin"));
+         fs::remove(ws / "stereo" / "depth_maps" / "view_03.png.dispmvs.photometric.bin");
+         TempDir scratch;
+         const testing::ProgramRun run = testing::RunProgram(
+             scratch, DISPMVS_COLMAP_PROGRAM,
+             "--workspace_path '" + ws.string() + "' --mode photometric --max_image_size 64 --threads 1");
+         EXPECT_EQ(run.status, 1) << run.out << run.err;
+       },
+       ""},
       {"eval_ply_missing", 1,
        "error: {DIR}/none.ply: no such file",
        Program::kEval, Nothing(), " --ply {DIR}/none.ply"},
@@ -486,7 +551,29 @@ TEST_P(BadInputTest, ExitStatusMessageAndNothingPartial) {
     // Views failed: the closing summary line says so, in full.
     EXPECT_NE(run.out.find(" (with failures: exit status 1)\n"), std::string::npos) << run.out;
   }
+  if (!bad.also_says.empty()) {
+    EXPECT_NE(run.out.find(Substitute(bad.also_says, ws, dir.path())), std::string::npos)
+        << run.out;
+  }
   const auto after = testing::FinalOutputs(dir.path());
+  if (bad.written == Written::kAllOthers) {
+    // Every view but the failed ones has all its maps, and the cloud exists.
+    for (const auto& entry : fs::directory_iterator(ws / "images")) {
+      const std::string view = entry.path().filename().string();
+      if (std::find(bad.failed_views.begin(), bad.failed_views.end(), view) !=
+          bad.failed_views.end()) {
+        continue;
+      }
+      for (const char* kind : {"depth_maps", "normal_maps", "confidence_maps"}) {
+        for (const char* type : {"photometric", "geometric"}) {
+          EXPECT_TRUE(fs::is_regular_file(ws / "stereo" / kind /
+                                          (view + ".dispmvs." + type + ".bin")))
+              << view << " " << kind << " " << type;
+        }
+      }
+    }
+    EXPECT_TRUE(fs::is_regular_file(ws / "fused.ply"));
+  }
   if (bad.written == Written::kNothing) {
     EXPECT_EQ(Changed(before, after), std::vector<std::string>{});
     return;

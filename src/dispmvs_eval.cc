@@ -2,7 +2,8 @@
 // PatchMatch's, any TYPE) against ground-truth depth maps, and point clouds
 // against a ground-truth cloud. See eval/workspace_eval.h for the layout and
 // eval/report.h for the output. Errors print one line "error: <message>" on
-// stderr with exit status 1.
+// stderr with exit status 1; so does a table that misses views dispmvs_colmap
+// failed on (a "warning:" line per view after the table, with the reason).
 
 #include <boost/program_options.hpp>
 
@@ -104,6 +105,11 @@ TYPE DIR/NAME.TYPE.depth.png (same colour scale as the view's GT: its min
 depth blue to its max red, no depth black) and DIR/NAME.TYPE.error.png
 (relative error 0 blue to --png_max_error and above red; GT without a
 prediction white; no GT black). Files are written atomically.
+
+Views dispmvs_colmap failed on (a damaged image, say) have no dispmvs.* map;
+their run recorded why (WS/stereo/dispmvs_records/NAME.txt). Each is named
+after the table with that reason ("warning: NAME has no TYPE map: ..."), and
+the exit status is then 1: the numbers above leave those views out.
 
 --tsv FILE writes a summary for scripts that add up many workspaces exactly:
 tab-separated, '#' lines are comments, a '#' header line with the column
@@ -287,7 +293,17 @@ int Run(const Options& options) {
     eval::WriteTsvReport(report, options.tsv_path);
     std::cout << "tsv: " << options.tsv_path << '\n';
   }
-  return 0;
+  // Views the run failed on are missing from the table: an incomplete
+  // evaluation, said after it and in the exit status.
+  int status = 0;
+  for (const eval::TypeDepthResult& type : report.types) {
+    for (const eval::TypeDepthResult::FailedView& failed : type.failed_views) {
+      std::cout << "warning: " << failed.image_name << " has no " << type.type
+                << " map: dispmvs_colmap failed on it: " << failed.reason << '\n';
+      status = 1;
+    }
+  }
+  return status;
 }
 
 }  // namespace

@@ -1,16 +1,21 @@
 // libFuzzer target for reading a workspace image for its camera
-// (ReadImageRgb, ReadImageForCamera): the input is the whole image file, in
-// any format OpenCV decodes.
+// (ReadImageHeader, ReadImageRgb, ReadImageForCamera): the input is the whole
+// image file, in any format.
 //
-// OpenCV is linked as Debian ships it, uninstrumented: the target tests what
-// the project does around the decoder (type and channel handling, the size
-// check against the camera, the resize and the intrinsics), not the decoders,
-// whose code gives the fuzzer no coverage feedback.
+// OpenCV, libtiff and libwebp are linked as Debian ships them,
+// uninstrumented: the target tests what the project does before and around
+// the decoders (the format and header checks that decide what reaches a
+// decoder at all, the memory bounds, type and channel handling, the size
+// check against the camera, the resize and the intrinsics). Only what
+// colmap_io/image_header.cc accepts reaches OpenCV, and that is the code
+// whose branches the fuzzer sees.
 //
-// Properties checked, besides "no crash, no sanitizer report, no huge
-// allocation" (run with -rss_limit_mb):
-//  * both functions throw nothing but IoError;
-//  * an accepted image is CV_32FC3, non-empty, with every value in [0, 1];
+// Properties checked, besides "no crash, no abort inside a decoder, no
+// sanitizer report, no huge allocation" (run with -rss_limit_mb and
+// -malloc_limit_mb):
+//  * the functions throw nothing but IoError;
+//  * an accepted image has the header's size, is CV_32FC3, non-empty, with
+//    every value in [0, 1];
 //  * for a PINHOLE camera of the decoded size, ReadImageForCamera returns the
 //    same pixels and K when nothing is resized, and the size of
 //    ComputeResizedSize and K of ScaleIntrinsics under smaller limits, values
@@ -23,11 +28,10 @@
 #include <cstring>
 #include <string>
 
-#include <unistd.h>
-
 #include <opencv2/core.hpp>
 
 #include "colmap_io/error.h"
+#include "colmap_io/image_header.h"
 #include "colmap_io/image_io.h"
 #include "colmap_io/sparse_model.h"
 #include "tests/fuzz/fuzz_support.h"
@@ -37,40 +41,10 @@ namespace {
 using dispmvs::colmap_io::Camera;
 using dispmvs::colmap_io::IoError;
 
-// Pixels above this many are refused by OpenCV's decoders (the
-// OPENCV_IO_MAX_IMAGE_PIXELS setting, 2^30 by default): a 16-byte header can
-// claim a gigapixel image, and decoding it would hit the fuzzer's memory
-// limit inside OpenCV, which is not the code under test. OpenCV reads the
-// setting while it is loaded, so it must be in the environment at start.
-constexpr const char* kMaxImagePixels = "262144";
-
-// Which decoder OpenCV will pick, from the file signature. Its code is not
-// instrumented, so without these branches every format that decodes to the
-// same pixel type looks the same to libFuzzer and all but one would drop out
-// of its corpus; the comparisons also hand it the signatures of formats the
-// seeds lack.
-int FormatOf(const uint8_t* data, size_t size) {
-  const auto starts = [&](const char* magic, size_t length) {
-    return size >= length && std::memcmp(data, magic, length) == 0;
-  };
-  if (starts("\x89PNG\r\n\x1a\n", 8)) return 1;
-  if (starts("\xff\xd8\xff", 3)) return 2;
-  if (starts("BM", 2)) return 3;
-  if (starts("II*", 4) || starts("MM\0*", 4)) return 4;
-  if (starts("RIFF", 4)) return 5;  // WebP
-  if (starts("P5", 2) || starts("P2", 2)) return 6;
-  if (starts("P6", 2) || starts("P3", 2)) return 7;
-  if (starts("P1", 2) || starts("P4", 2)) return 8;
-  if (starts("P7", 2)) return 9;   // PAM
-  if (starts("Pf", 2) || starts("PF", 2)) return 10;  // PFM
-  if (starts("#?", 2)) return 11;  // Radiance HDR
-  if (starts("\x59\xa6\x6a\x95", 4)) return 12;  // Sun raster
-  if (starts("\x76\x2f\x31\x01", 4)) return 13;  // OpenEXR
-  if (starts("\0\0\0\x0cjP  ", 8) || starts("\xff\x4f\xff\x51", 4)) return 14;  // JPEG 2000
-  return 0;
-}
-// Where FormatOf's result goes, so that the optimizer keeps its branches.
-volatile int format_seen = 0;
+// The pixel limit the target reads with (the product's default is 2^28): a
+// 16-byte header can claim a gigapixel image, and the limits are what keeps
+// the decoders' memory bounded, so they are part of what is tested.
+constexpr int64_t kMaxPixels = 262144;
 
 // Values are in [0, 1] (area averaging may round a hair above 1).
 bool ValuesInUnitRange(const cv::Mat& image) {
@@ -97,33 +71,32 @@ Camera PinholeCamera(int width, int height) {
 
 }  // namespace
 
-extern "C" int LLVMFuzzerInitialize(int*, char*** argv) {
-  // OpenCV logs every file it cannot decode: most inputs.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  // OpenCV logs every file it cannot decode.
   setenv("OPENCV_LOG_LEVEL", "OFF", /*overwrite=*/0);
-  // OpenCV read the pixel limit when it was loaded (see kMaxImagePixels): run
-  // again with it in the environment.
-  if (std::getenv("OPENCV_IO_MAX_IMAGE_PIXELS") == nullptr) {
-    setenv("OPENCV_IO_MAX_IMAGE_PIXELS", kMaxImagePixels, /*overwrite=*/1);
-    execv("/proc/self/exe", *argv);
-    std::abort();  // exec failed
-  }
   // No worker threads: one input at a time.
   cv::setNumThreads(0);
   return 0;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  format_seen = FormatOf(data, size);
   const auto path = dispmvs::fuzz::ScratchPath("image");
   dispmvs::fuzz::WriteBytes(path, data, size);
 
+  dispmvs::colmap_io::ImageLimits limits;
+  limits.max_pixels = kMaxPixels;
   cv::Mat rgb;
+  dispmvs::colmap_io::ImageHeader header;
   try {
-    rgb = dispmvs::colmap_io::ReadImageRgb(path);
+    header = dispmvs::colmap_io::ReadImageHeader(
+        std::string(reinterpret_cast<const char*>(data), size), path.string());
+    rgb = dispmvs::colmap_io::ReadImageRgb(path, limits);
   } catch (const IoError&) {
     return 0;  // rejected cleanly: the expected outcome for most inputs
   }
-  if (!ValuesInUnitRange(rgb)) std::abort();
+  if (!ValuesInUnitRange(rgb) || rgb.cols != header.width || rgb.rows != header.height) {
+    std::abort();
+  }
 
   const Camera camera = PinholeCamera(rgb.cols, rgb.rows);
   const Eigen::Matrix3d K = camera.CalibrationMatrix();
