@@ -50,7 +50,10 @@ constexpr const char* kDescription = R"(dispmvs_colmap: DispMVS dense reconstruc
 Usage: dispmvs_colmap --workspace_path WS [options]
 
 WS is a dense workspace as written by `colmap image_undistorter` (WS/images,
-WS/sparse, WS/stereo). The default mode runs three passes, like
+WS/sparse, WS/stereo). Images may be PNG, JPEG, TIFF, BMP, PNM or WebP of their
+camera's size, checked on their headers before decoding; a missing or damaged
+one fails its own view (with the reason, exit status 1) and is left out as a
+source of the others. The default mode runs three passes, like
 `colmap patch_match_stereo` followed by `colmap stereo_fusion`:
   1. photometric: the DispMVS network per reference image of
      WS/stereo/patch-match.cfg (without it: every image, `__auto__`
