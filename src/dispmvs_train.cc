@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "src/program_main.h"
+#include "train/error_breakdown.h"
 #include "train/source_pixel_metrics.h"
 #include "train/trainer.h"
 
@@ -41,6 +42,10 @@ options (default):
                               training only, evaluation reads it from WEIGHTS
   --widenings LIST            evaluation only: comma-separated x values, 'none' = no hint at all
                               (v2 weights only) (1,2,3)
+  --breakdown X               evaluation only: instead of the table, where the error comes from at
+                              widening X (or 'none'): the scores after every coarse and fine
+                              iteration, and the output by texture and by depth (thirds per scene);
+                              see train/error_breakdown.h
   --eval_coarse_iterations K  evaluation only: GRU iterations of the coarse stage, 0 = the weights' (0)
   --eval_fine_iterations K    evaluation only: the same for the fine stage (the speed knob of
                               dispmvs_colmap --fine_iterations) (0)
@@ -174,6 +179,7 @@ std::vector<double> ParseWidenings(const std::string& flag, const std::string& v
 
 struct CommandLine {
   std::vector<double> widenings{1, 2, 3};
+  std::vector<double> breakdown;  // one widening: --evaluate prints the error breakdown
   TrainOptions options;
   std::string evaluate_weights;  // empty: train
   bool help = false;
@@ -219,6 +225,10 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--max_cpu_minutes") o.max_cpu_minutes = ParseDouble(flag, value);
     else if (flag == "--max_minutes") o.max_minutes = ParseDouble(flag, value);
     else if (flag == "--widenings") cl.widenings = ParseWidenings(flag, value);
+    else if (flag == "--breakdown") {
+      cl.breakdown = ParseWidenings(flag, value);
+      if (cl.breakdown.size() != 1) throw std::invalid_argument("--breakdown takes one x (or 'none')");
+    }
     else if (flag == "--texture_dir") o.texture_dir = value;
     else if (flag == "--photo_probability") o.photo_probability = ParseDouble(flag, value);
     else if (flag == "--low_memory") o.low_memory = ParseSwitch(flag, value);
@@ -238,11 +248,24 @@ CommandLine Parse(int argc, char** argv) {
   if (!cl.evaluate_weights.empty() && !o.checkpoint_dir.empty()) {
     throw std::invalid_argument("--evaluate and --checkpoint_dir exclude each other");
   }
+  if (!cl.breakdown.empty() && cl.evaluate_weights.empty()) {
+    throw std::invalid_argument("--breakdown goes with --evaluate WEIGHTS");
+  }
   return cl;
 }
 
 void PrintEvaluation(const CommandLine& cl) {
   const auto& o = cl.options;
+  if (!cl.breakdown.empty()) {
+    const double x = cl.breakdown.front();
+    std::cout << "weights " << cl.evaluate_weights << ": error breakdown on " << o.num_validation_scenes
+              << " validation scenes (seeds " << o.validation_seed_base << "..), " << o.width << "x"
+              << o.height << ", N = " << o.num_sources << ", x="
+              << (x == 0 ? std::string("none") : std::to_string(x).substr(0, 5)) << "\n"
+              << dispmvs::train::FormatBreakdown(
+                     dispmvs::train::EvaluateErrorBreakdown(cl.evaluate_weights, o, x));
+    return;
+  }
   const auto rows = dispmvs::train::EvaluateWeights(cl.evaluate_weights, o, cl.widenings);
   std::cout << "weights " << cl.evaluate_weights << ": " << o.num_validation_scenes
             << " validation scenes (seeds " << o.validation_seed_base << "..), " << o.width << "x"

@@ -19,6 +19,7 @@
 #include "synth/generator.h"
 #include "train/batch.h"
 #include "train/checkpoint.h"
+#include "train/error_breakdown.h"
 #include "train/train_log.h"
 #include "train/training_samples.h"
 #include "train/validation.h"
@@ -377,8 +378,12 @@ void Train(const TrainOptions& options, std::ostream& console) {
   log.Line("wrote " + (dir / "model.safetensors").string());
 }
 
-std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, const TrainOptions& options,
-                                            const std::vector<double>& widenings) {
+namespace {
+
+// The weights at `weights_path` as the evaluation options ask (iterations,
+// precision, device), and the validation scenes on that device.
+std::pair<DispMvsNet, std::vector<synth::SynthSample>> LoadForEvaluation(
+    const std::string& weights_path, const TrainOptions& options) {
   options.Check(/*for_training=*/false);
   const torch::Device device = model::ParseUsableDevice(options.device);
   if (options.num_validation_scenes < 1) throw std::invalid_argument("num_validation_scenes must be >= 1");
@@ -392,8 +397,21 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
       options.eval_fine_iterations > 0 ? options.eval_fine_iterations : config.fine_iterations);
   net->set_precision(model::ResolvePrecision(options.precision, device));
   net->to(device);
-  const auto scenes = ValidationScenes(options, device);
+  return {net, ValidationScenes(options, device)};
+}
+
+}  // namespace
+
+std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, const TrainOptions& options,
+                                            const std::vector<double>& widenings) {
+  auto [net, scenes] = LoadForEvaluation(weights_path, options);
   return Validate(net, scenes, options, widenings, /*look_from_sources=*/true);
+}
+
+ErrorBreakdown EvaluateErrorBreakdown(const std::string& weights_path, const TrainOptions& options,
+                                      double widening) {
+  auto [net, scenes] = LoadForEvaluation(weights_path, options);
+  return BreakDownErrors(net, scenes, options, widening);
 }
 
 }  // namespace dispmvs::train

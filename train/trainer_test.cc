@@ -13,6 +13,7 @@
 #include "model/dispmvs_net.h"
 #include "model/safetensors.h"
 #include "tests/support/temp_dir.h"
+#include "train/error_breakdown.h"
 #include "train/step_log_test_util.h"
 
 namespace dispmvs::train {
@@ -275,6 +276,53 @@ TEST(TrainerV2Test, CpuOrWallClockBudgetStopsTheRunWithAModel) {
     EXPECT_TRUE(fs::exists(tmp.path() / "run" / "model.safetensors"));
     EXPECT_TRUE(fs::exists(tmp.path() / "run" / "checkpoint-000000001.safetensors"));
   }
+}
+
+TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnce) {
+  TempDir tmp;
+  std::ostringstream log;
+  Train(TinyV2Options(tmp.path() / "v2", 1), log);
+  const std::string weights = (tmp.path() / "v2" / "model.safetensors").string();
+  TrainOptions eval = TinyOptions(tmp.path() / "unused", 1);
+  eval.checkpoint_dir.clear();
+  eval.num_validation_scenes = 2;
+  eval.eval_coarse_iterations = 2;
+  eval.eval_fine_iterations = 3;
+  const ErrorBreakdown breakdown = EvaluateErrorBreakdown(weights, eval, 0);
+  ASSERT_EQ(breakdown.iterations.size(), 5u);
+  EXPECT_EQ(breakdown.iterations[0].label, "coarse 1");
+  EXPECT_EQ(breakdown.iterations[1].label, "coarse 2");
+  EXPECT_EQ(breakdown.iterations[2].label, "fine 1");
+  EXPECT_EQ(breakdown.iterations[4].label, "fine 3");
+  // The last iteration is the output the evaluation table scores (same
+  // scenes, same seeds), computed independently by the eval-mode pass.
+  const WideningResult table = EvaluateWeights(weights, eval, {0}).front();
+  const BreakdownRow& last = breakdown.iterations.back();
+  EXPECT_EQ(last.depth.gt_pixels, table.metrics.gt_pixels);
+  EXPECT_DOUBLE_EQ(last.depth.within_1, table.metrics.within_1);
+  EXPECT_DOUBLE_EQ(last.depth.within_2, table.metrics.within_2);
+  EXPECT_DOUBLE_EQ(last.depth.abs_rel, table.metrics.abs_rel);
+  EXPECT_DOUBLE_EQ(last.source_pixels.within_1px, table.source_pixels.within_1px);
+  // Texture and depth thirds: every ground-truth pixel in exactly one band,
+  // each band about a third, and the bands' hits add up to the whole.
+  for (const auto* bands : {&breakdown.texture, &breakdown.depth}) {
+    ASSERT_EQ(bands->size(), 3u);
+    int64_t pixels = 0;
+    double within_2 = 0;
+    for (const BreakdownRow& band : *bands) {
+      pixels += band.depth.gt_pixels;
+      within_2 += band.depth.within_2 * static_cast<double>(band.depth.gt_pixels);
+      EXPECT_NEAR(static_cast<double>(band.depth.gt_pixels) / table.metrics.gt_pixels, 1.0 / 3, 0.05)
+          << band.label;
+    }
+    EXPECT_EQ(pixels, table.metrics.gt_pixels);
+    EXPECT_NEAR(within_2, table.metrics.within_2 * static_cast<double>(pixels), 1e-6);
+  }
+  EXPECT_EQ(breakdown.texture[0].label, "texture weak");
+  EXPECT_EQ(breakdown.depth[2].label, "depth far");
+  const std::string text = FormatBreakdown(breakdown);
+  EXPECT_NE(text.find("fine 3          <1%: "), std::string::npos) << text;
+  EXPECT_NE(text.find("texture strong  <1%: "), std::string::npos) << text;
 }
 
 TEST(TrainerV2Test, EvaluationWithoutAHintOnlyForV2Weights) {

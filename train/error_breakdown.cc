@@ -1,0 +1,162 @@
+#include "train/error_breakdown.h"
+
+#include <cstdio>
+#include <sstream>
+#include <stdexcept>
+
+#include "train/batch.h"
+#include "train/validation.h"
+
+namespace dispmvs::train {
+namespace {
+
+using model::DispMvsNet;
+namespace F = torch::nn::functional;
+
+// What one row adds up over the scenes.
+struct RowSums {
+  ValidationDepthSums depth;
+  SourcePixelCounts source_pixels;
+};
+
+// The depth and source-pixel sums of `depth` (valid where > 0) over the
+// reference pixels of `band` ([1,1,H,W] bool) that have ground truth.
+RowSums Score(const TrainingBatch& batch, const torch::Tensor& depth, const torch::Tensor& band) {
+  const torch::Tensor valid = depth > 0;
+  const torch::Tensor gt_valid = batch.gt_valid & band;
+  // The reference's ground truth outside the band reads "no depth", so that
+  // only the band's pixels are looked at from the sources.
+  torch::Tensor gt_depths = batch.gt_depths.clone();
+  gt_depths.select(1, 0).mul_(band.to(gt_depths.dtype()));
+  RowSums sums;
+  sums.depth = SumValidationDepth(depth, valid, batch.gt_depth, gt_valid);
+  sums.source_pixels = CountSourcePixels(gt_depths, batch.input.intrinsics,
+                                         batch.input.extrinsics, depth, valid);
+  return sums;
+}
+
+// Local texture of the reference image: the magnitude of the grey image's
+// gradient (central differences), averaged over 5x5 pixels. [1,1,H,W].
+torch::Tensor LocalTexture(const torch::Tensor& images) {
+  const torch::Tensor grey = images.select(1, 0).mean(1, /*keepdim=*/true).to(torch::kFloat);
+  const torch::Tensor padded = F::pad(grey, F::PadFuncOptions({1, 1, 1, 1}).mode(torch::kReplicate));
+  using torch::indexing::Slice;
+  const torch::Tensor gx = (padded.index({Slice(), Slice(), Slice(1, -1), Slice(2, torch::indexing::None)}) -
+                            padded.index({Slice(), Slice(), Slice(1, -1), Slice(0, -2)})) / 2;
+  const torch::Tensor gy = (padded.index({Slice(), Slice(), Slice(2, torch::indexing::None), Slice(1, -1)}) -
+                            padded.index({Slice(), Slice(), Slice(0, -2), Slice(1, -1)})) / 2;
+  const torch::Tensor magnitude = (gx * gx + gy * gy).sqrt();
+  return F::avg_pool2d(magnitude, F::AvgPool2dFuncOptions(5).stride(1).padding(2)
+                                      .count_include_pad(false));
+}
+
+// Thirds of `value` over the pixels of `mask`: three [1,1,H,W] bool masks,
+// lowest values first (empty when the mask is).
+std::vector<torch::Tensor> Thirds(const torch::Tensor& value, const torch::Tensor& mask) {
+  const torch::Tensor values = value.masked_select(mask).to(torch::kDouble);
+  if (values.numel() == 0) return {mask, mask, mask};  // all false
+  const torch::Tensor cuts =
+      torch::quantile(values, torch::tensor({1.0 / 3, 2.0 / 3}, values.options()));
+  const double low = cuts[0].item<double>(), high = cuts[1].item<double>();
+  const torch::Tensor v = value.to(torch::kDouble);
+  return {mask & (v <= low), mask & (v > low) & (v <= high), mask & (v > high)};
+}
+
+BreakdownRow Finish(const std::string& label, const RowSums& sums) {
+  return {label, FinalizeValidation(sums.depth), SharesOf(sums.source_pixels)};
+}
+
+}  // namespace
+
+ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                               const TrainOptions& options, double widening) {
+  if (widening == 0 && net->config().NeedsDepthRange()) {
+    throw std::invalid_argument("weights of config '" + net->config().name +
+                                "' need a depth-range hint: no breakdown without one");
+  }
+  // Training mode keeps every iteration's output (DispMvsOutput::inv_depths);
+  // it changes nothing else in a forward pass. No gradient is needed.
+  const bool was_training = net->is_training();
+  net->train();
+  torch::NoGradGuard no_grad;
+  std::vector<RowSums> iterations, texture(3), depth(3);
+  for (size_t i = 0; i < scenes.size(); ++i) {
+    const TrainingBatch batch = MakeBatch({scenes[i]}, widening);
+    // The seeds of the validation table (validation.cc), so the last
+    // iteration is that table's output.
+    const auto output =
+        net->forward(batch.input, internal::CpuGenerator(options.validation_seed_base + i));
+    if (iterations.empty()) iterations.resize(output.inv_depths.size());
+    if (output.inv_depths.size() != iterations.size()) {
+      throw std::logic_error("the network returned another number of iterations");
+    }
+    const torch::Tensor all = torch::ones_like(batch.gt_valid);
+    for (size_t k = 0; k < iterations.size(); ++k) {
+      const torch::Tensor inv = output.inv_depths[k];
+      const torch::Tensor iteration_depth =
+          torch::where(inv > 0, inv.reciprocal(), torch::zeros_like(inv));
+      const RowSums sums = Score(batch, iteration_depth, all);
+      iterations[k].depth += sums.depth;
+      iterations[k].source_pixels += sums.source_pixels;
+    }
+    const torch::Tensor& final_inv = output.inv_depths.back();
+    const torch::Tensor final_depth =
+        torch::where(final_inv > 0, final_inv.reciprocal(), torch::zeros_like(final_inv));
+    const auto texture_bands = Thirds(LocalTexture(batch.input.images), batch.gt_valid);
+    const auto depth_bands = Thirds(batch.gt_depth, batch.gt_valid);
+    for (size_t b = 0; b < texture_bands.size(); ++b) {
+      const RowSums t = Score(batch, final_depth, texture_bands[b]);
+      texture[b].depth += t.depth;
+      texture[b].source_pixels += t.source_pixels;
+    }
+    for (size_t b = 0; b < depth_bands.size(); ++b) {
+      const RowSums d = Score(batch, final_depth, depth_bands[b]);
+      depth[b].depth += d.depth;
+      depth[b].source_pixels += d.source_pixels;
+    }
+  }
+  net->train(was_training);
+
+  ErrorBreakdown breakdown;
+  // config() holds the iterations the passes ran with (set_iterations).
+  const int64_t coarse_count = net->config().coarse_iterations;
+  if (static_cast<int64_t>(iterations.size()) != coarse_count + net->config().fine_iterations) {
+    throw std::logic_error("the network returned another number of iterations than it runs");
+  }
+  for (int64_t k = 0; k < static_cast<int64_t>(iterations.size()); ++k) {
+    const bool is_coarse = k < coarse_count;
+    const std::string label = is_coarse ? "coarse " + std::to_string(k + 1)
+                                        : "fine " + std::to_string(k - coarse_count + 1);
+    breakdown.iterations.push_back(Finish(label, iterations[static_cast<size_t>(k)]));
+  }
+  const char* texture_names[] = {"texture weak", "texture medium", "texture strong"};
+  const char* depth_names[] = {"depth near", "depth middle", "depth far"};
+  for (int b = 0; b < 3; ++b) {
+    breakdown.texture.push_back(Finish(texture_names[b], texture[b]));
+    breakdown.depth.push_back(Finish(depth_names[b], depth[b]));
+  }
+  return breakdown;
+}
+
+std::string FormatBreakdown(const ErrorBreakdown& breakdown) {
+  std::ostringstream out;
+  const auto line = [&out](const BreakdownRow& row) {
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "%-15s <1%%: %.4f  <2%%: %.4f  <5%%: %.4f  AbsRel: %.4f  coverage: %.4f  |  "
+                  "source <1px: %.4f  <2px: %.4f  (%lld GT pixels)\n",
+                  row.label.c_str(), row.depth.within_1, row.depth.within_2, row.depth.within_5,
+                  row.depth.abs_rel, row.depth.coverage, row.source_pixels.within_1px,
+                  row.source_pixels.within_2px, static_cast<long long>(row.depth.gt_pixels));
+    out << text;
+  };
+  out << "after each iteration (fused, upsampled to full resolution; the last is the output):\n";
+  for (const BreakdownRow& row : breakdown.iterations) line(row);
+  out << "the output by local texture of the reference (gradient, thirds per scene):\n";
+  for (const BreakdownRow& row : breakdown.texture) line(row);
+  out << "the output by ground-truth depth (thirds per scene):\n";
+  for (const BreakdownRow& row : breakdown.depth) line(row);
+  return out.str();
+}
+
+}  // namespace dispmvs::train

@@ -1,0 +1,59 @@
+#pragma once
+// Where the depth error comes from, on the validation scenes: the first part
+// of the precision diagnosis (dispmvs_train --evaluate W --breakdown).
+//
+//  * After every GRU iteration, coarse then fine: the fused inverse depth
+//    that iteration gives, upsampled to full resolution as the output is,
+//    scored like the output (depth within 1 / 2 / 5 %, AbsRel) and seen from
+//    the sources (its matches within 1 / 2 source pixels of the true ones,
+//    source_pixel_metrics.h). The last row is the output itself. Whether the
+//    fine iterations still gain, and how far from sub-pixel matches the
+//    last one is, says which stage holds the error.
+//  * The output split by texture (the reference image's local gradient) and
+//    by ground-truth depth, each in thirds per scene: whether the error sits
+//    on weak texture (ambiguous matches) or on well-textured surfaces
+//    (imprecise matches), near or far.
+//
+// The scenes run as in the validation table (same seeds, same
+// initialisation), so the last iteration's numbers are that table's row of
+// the same depth-range widening.
+
+#include <string>
+#include <vector>
+
+#include "model/dispmvs_net.h"
+#include "synth/generator.h"
+#include "train/source_pixel_metrics.h"
+#include "train/trainer.h"
+#include "train/validation_metrics.h"
+
+namespace dispmvs::train {
+
+struct BreakdownRow {
+  std::string label;                  // "coarse 1", "fine 4", "texture weak", "depth far", ...
+  ValidationDepthMetrics depth;       // over the row's ground-truth pixels
+  SourcePixelShares source_pixels;    // over the row's (pixel, seeing source) pairs
+};
+
+struct ErrorBreakdown {
+  std::vector<BreakdownRow> iterations;  // coarse 1..Tc, fine 1..Tf
+  std::vector<BreakdownRow> texture;     // weak, medium, strong
+  std::vector<BreakdownRow> depth;       // near, middle, far
+};
+
+// `widening` as in EvaluateWeights (0: no hint). The network's iterations
+// and precision are used as set. Throws std::invalid_argument as validation
+// does (no hint for weights that need one).
+ErrorBreakdown BreakDownErrors(model::DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
+                               const TrainOptions& options, double widening);
+
+// Loads the weights as EvaluateWeights does and breaks down their errors on
+// the validation scenes of `options`.
+ErrorBreakdown EvaluateErrorBreakdown(const std::string& weights_path, const TrainOptions& options,
+                                      double widening);
+
+// A table: one line per row, "label  <1%: ...  <2%: ...  <5%: ...  AbsRel: ...
+// coverage: ...  | <1px: ...  <2px: ...", the three groups apart.
+std::string FormatBreakdown(const ErrorBreakdown& breakdown);
+
+}  // namespace dispmvs::train
