@@ -112,6 +112,18 @@ TEST(ImageHeaderTest, SizesComeFromTheHeaderFields) {
   EXPECT_EQ(pnm.format, ImageFormat::kPnm);
   EXPECT_EQ(pnm.width, 640);
   EXPECT_EQ(pnm.height, 480);
+  // The byte after a number is taken whatever it is: "3#2" is 3, then 2 (no
+  // comment). Checked against OpenCV's own decoding of the same bytes.
+  for (const std::string& header : {std::string("P5 3#2 255 "), std::string("P5\n3\n#c\r2\n255\n"),
+                                     std::string("P5 3 #c\n2#255 ")}) {
+    SCOPED_TRACE(header);
+    const std::string bytes = header + "abcdef";
+    const ImageHeader read = ReadImageHeader(bytes, "n");
+    const cv::Mat decoded = cv::imdecode(std::vector<uchar>(bytes.begin(), bytes.end()),
+                                         cv::IMREAD_UNCHANGED);
+    EXPECT_EQ(cv::Size(read.width, read.height), cv::Size(3, 2));
+    EXPECT_EQ(decoded.size(), cv::Size(3, 2));
+  }
 
   // SOI, an APP0 segment to skip, then a baseline frame header (precision 8,
   // height 0x0102, width 0x0304), then a scan and the end-of-image marker.
@@ -221,6 +233,21 @@ TEST(ImageHeaderTest, FuzzerFindingsAreRefusedWithoutDecoding) {
   camera.expected_size = cv::Size(320, 240);
   EXPECT_TRUE(Contains(ReadError(findings / "image-tiff-1gb.bin", camera),
                        "image is 16392x6 but the expected size is 320x240"));
+  // A PNM header whose second number follows a '#' right after the first:
+  // read here once as 27222x4 (a comment) while OpenCV's decoder read
+  // 27222x22220 and allocated 605 MB. Now read as the decoder reads it, and
+  // refused for its size.
+  const ImageHeader pnm = ReadImageHeader(ReadFileBytes(findings / "image-pnm-comment-605mb.bin"), "p");
+  EXPECT_EQ(pnm.width, 27222);
+  EXPECT_EQ(pnm.height, 22220);
+  // A 10-bit TIFF with a damaged strip, which OpenCV's own 10-bit unpacking
+  // decoded to other pixels on every read (bytes it never wrote).
+  EXPECT_TRUE(Contains(ReadError(findings / "image-tiff-10bit-uninitialised.bin"),
+                       "TIFF with 10 bits per sample is not supported (1, 8 or 16)"));
+  ImageLimits fuzzer_limit;
+  fuzzer_limit.max_pixels = 262144;
+  EXPECT_TRUE(Contains(ReadError(findings / "image-pnm-comment-605mb.bin", fuzzer_limit),
+                       "image of 27222x22220 is larger than 262144 pixels"));
 }
 
 }  // namespace
