@@ -278,10 +278,10 @@ void ReadTiff(const std::string& bytes, ImageHeader& header, const std::string& 
   SetSize(header, width, height, path);
   TIFFGetFieldDefaulted(tiff.get(), TIFFTAG_BITSPERSAMPLE, &bits);
   TIFFGetFieldDefaulted(tiff.get(), TIFFTAG_SAMPLESPERPIXEL, &samples);
-  // 1, 8 and 16 bits only. OpenCV unpacks 10, 12 and 14 bits with its own
-  // code, which on a damaged strip reads bytes it never wrote: the fuzzer
-  // found a 308-byte 10-bit TIFF that decoded to other pixels on every read.
-  // (32- and 64-bit samples are floats, which the project does not read.)
+  // 1, 8 and 16 bits only: 10, 12 and 14 bits go through OpenCV's own
+  // unpacking, which no camera image of a workspace needs (the first TIFF
+  // the fuzzer found decoding to other pixels on every read was a 10-bit
+  // one), and 32 and 64 bits are floats, which the project does not read.
   if (bits != 1 && bits != 8 && bits != 16) {
     throw IoError(path, "TIFF with " + std::to_string(bits) +
                             " bits per sample is not supported (1, 8 or 16)");
@@ -298,16 +298,48 @@ void ReadTiff(const std::string& bytes, ImageHeader& header, const std::string& 
   if (tile_height == 0 || (!tiled && tile_height == std::numeric_limits<uint32_t>::max())) {
     tile_height = height;
   }
-  // Strips or tiles that reach past the end of the file: a cut file.
+  // The colour model must fit the samples: OpenCV sizes its output by the
+  // one and reads the other, so an RGB image of 1 sample per pixel left two
+  // thirds of the image unwritten (the fuzzer found a 246-byte 16-bit TIFF
+  // that decoded to other pixels on every read).
+  uint16_t photometric = 0;
+  if (!TIFFGetField(tiff.get(), TIFFTAG_PHOTOMETRIC, &photometric)) {
+    throw IoError(path, "TIFF header gives no photometric interpretation (damaged file)");
+  }
+  const bool grey = photometric == PHOTOMETRIC_MINISWHITE || photometric == PHOTOMETRIC_MINISBLACK;
+  const bool colour = photometric == PHOTOMETRIC_RGB || photometric == PHOTOMETRIC_YCBCR;
+  if (!((grey && samples >= 1 && samples <= 4) || (colour && samples >= 3 && samples <= 4) ||
+        (photometric == PHOTOMETRIC_PALETTE && samples == 1))) {
+    throw IoError(path, "TIFF header is inconsistent or unsupported: photometric interpretation " +
+                            std::to_string(photometric) + " with " + std::to_string(samples) +
+                            " sample(s) per pixel");
+  }
+  // Strips or tiles that reach past the end of the file (a cut file), and,
+  // uncompressed, strips or tiles shorter than their pixels (libtiff makes
+  // up a missing StripByteCounts from the file's size).
+  uint16_t compression = COMPRESSION_NONE;
+  TIFFGetFieldDefaulted(tiff.get(), TIFFTAG_COMPRESSION, &compression);
   const uint32_t striles = TIFFNumberOfStrips(tiff.get());
+  const uint32_t rows_per_strip = std::min(tile_height, height);
+  const uint32_t strips_per_plane = (height + rows_per_strip - 1) / rows_per_strip;
   for (uint32_t strile = 0; strile < striles; ++strile) {
     int error = 0;
     const uint64_t offset = TIFFGetStrileOffsetWithErr(tiff.get(), strile, &error);
     const uint64_t count = TIFFGetStrileByteCountWithErr(tiff.get(), strile, &error);
+    const std::string what = std::string(tiled ? "tile " : "strip ") + std::to_string(strile);
     if (error || offset > bytes.size() || count > bytes.size() - offset) {
-      throw IoError(path, std::string("TIFF file is damaged or truncated: its ") +
-                              (tiled ? "tile " : "strip ") + std::to_string(strile) +
+      throw IoError(path, "TIFF file is damaged or truncated: its " + what +
                               " lies beyond the end of the file");
+    }
+    if (compression != COMPRESSION_NONE) continue;
+    const uint32_t first_row = (strile % strips_per_plane) * rows_per_strip;
+    const uint64_t needed =
+        tiled ? TIFFTileSize64(tiff.get())
+              : TIFFVStripSize64(tiff.get(), std::min(rows_per_strip, height - first_row));
+    if (count < needed) {
+      throw IoError(path, "TIFF file is damaged or truncated: its uncompressed " + what +
+                              " holds " + std::to_string(count) + " bytes of the " +
+                              std::to_string(needed) + " its pixels need");
     }
   }
   const uint64_t bytes_per_pixel =

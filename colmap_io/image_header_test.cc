@@ -244,6 +244,11 @@ TEST(ImageHeaderTest, FuzzerFindingsAreRefusedWithoutDecoding) {
   // decoded to other pixels on every read (bytes it never wrote).
   EXPECT_TRUE(Contains(ReadError(findings / "image-tiff-10bit-uninitialised.bin"),
                        "TIFF with 10 bits per sample is not supported (1, 8 or 16)"));
+  // A 16-bit TIFF that says RGB with one sample per pixel: OpenCV made a
+  // 3-channel image and filled a third of it, so every read differed.
+  EXPECT_TRUE(Contains(ReadError(findings / "image-tiff-rgb-one-sample-uninitialised.bin"),
+                       "TIFF header is inconsistent or unsupported: photometric interpretation 2 "
+                       "with 1 sample(s) per pixel"));
   ImageLimits fuzzer_limit;
   fuzzer_limit.max_pixels = 262144;
   EXPECT_TRUE(Contains(ReadError(findings / "image-pnm-comment-605mb.bin", fuzzer_limit),
