@@ -183,6 +183,51 @@ TEST(ImageHeaderTest, ForeignAndDamagedFilesAreRefusedWithAReason) {
   }
 }
 
+// A little-endian, uncompressed 4x2 8-bit grey TIFF in two strips of one
+// row (4 bytes each), the first saying it holds `first_strip_bytes`, of
+// which the file has `present` of the 8 pixel bytes.
+std::string GreyTiff(uint16_t first_strip_bytes, std::size_t present) {
+  std::string tiff("II*\0", 4);
+  const auto u16 = [&tiff](uint32_t v) {
+    tiff += static_cast<char>(v & 0xFF);
+    tiff += static_cast<char>((v >> 8) & 0xFF);
+  };
+  const uint32_t entries = 8, data = 8 + 2 + entries * 12 + 4;
+  u16(8), u16(0);  // the directory right after the header
+  u16(entries);
+  // SHORT values, one or two of them, inline in the entry.
+  const auto entry = [&](uint32_t tag, uint32_t count, uint32_t first, uint32_t second) {
+    u16(tag), u16(3), u16(count), u16(0), u16(first), u16(second);
+  };
+  entry(256, 1, 4, 0);                         // ImageWidth
+  entry(257, 1, 2, 0);                         // ImageLength
+  entry(258, 1, 8, 0);                         // BitsPerSample
+  entry(259, 1, 1, 0);                         // Compression: none
+  entry(262, 1, 1, 0);                         // Photometric: min is black
+  entry(273, 2, data, data + 4);               // StripOffsets
+  entry(278, 1, 1, 0);                         // RowsPerStrip
+  entry(279, 2, first_strip_bytes, 4);         // StripByteCounts
+  u16(0), u16(0);                              // no next directory
+  tiff += std::string("abcdefgh").substr(0, present);
+  return tiff;
+}
+
+TEST(ImageHeaderTest, UncompressedTiffStripsMustHoldTheirPixels) {
+  TempDir dir;
+  const fs::path whole = dir.Make("whole.tif"), cut = dir.Make("cut.tif"),
+                 short_strip = dir.Make("short.tif");
+  WriteFileBytes(whole, GreyTiff(4, 8));
+  WriteFileBytes(cut, GreyTiff(4, 6));
+  WriteFileBytes(short_strip, GreyTiff(3, 8));
+  EXPECT_EQ(ReadImageRgb(whole).size(), cv::Size(4, 2));  // the hand-made file is valid
+  EXPECT_TRUE(Contains(ReadError(cut),
+                       "TIFF file is damaged or truncated: its strip 1 lies beyond the end of the "
+                       "file"));
+  EXPECT_TRUE(Contains(ReadError(short_strip),
+                       "TIFF file is damaged or truncated: its uncompressed strip 0 holds 3 bytes "
+                       "of the 4 its pixels need"));
+}
+
 TEST(ImageHeaderTest, WrongSizeIsRefusedBeforeDecoding) {
   TempDir dir;
   // A 37x23 PNG whose compressed pixels are destroyed (its chunks intact):

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <map>
 #include <optional>
 #include <set>
 #include <sstream>
@@ -95,26 +96,47 @@ TEST_F(PhotometricPassTest, WritesEveryViewAndResumesBitForBit) {
   EXPECT_EQ(ReadFileBytes(paths.normal), normal_bytes);
 }
 
-TEST_F(PhotometricPassTest, UnreadableImageFailsTheViewsThatNeedIt) {
+// A damaged image fails its own view only: the views that list it as a
+// source run without it, say so, and record the sources they used; the failed
+// view's record says why.
+TEST_F(PhotometricPassTest, UnreadableImageFailsItsOwnViewAndIsLeftOutOfTheOthers) {
   const std::string& broken = names_[0];  // an end of the arc: fewer readers
   std::ofstream(workspace_.ImagePath(broken), std::ios::trunc) << "not a PNG";
   const colmap_io::image_t broken_id = plan_.model.FindImageByName(broken)->image_id;
-  std::set<std::string> readers;
+  std::map<std::string, int> sources_left;  // views that read it as a source
   for (const colmap_io::StereoProblem& problem : plan_.problems) {
-    bool reads = problem.reference_image_id == broken_id;
-    for (colmap_io::image_t source : problem.source_image_ids) reads |= source == broken_id;
-    if (reads) readers.insert(plan_.ImageOf(problem.reference_image_id).name);
+    const int sources = static_cast<int>(problem.source_image_ids.size());
+    for (colmap_io::image_t source : problem.source_image_ids) {
+      if (source == broken_id) sources_left[plan_.ImageOf(problem.reference_image_id).name] = sources - 1;
+    }
   }
-  ASSERT_LT(readers.size(), 7u);
+  ASSERT_FALSE(sources_left.empty());
 
   const PassSummary summary = RunPhotometricPass(workspace_, plan_, options_, log_);
-  EXPECT_EQ(summary.done, 7 - static_cast<int>(readers.size())) << log_.str();
-  ASSERT_EQ(summary.failures.size(), readers.size());
-  for (const std::string& failure : summary.failures) {
-    const std::string name = failure.substr(0, failure.find(": "));
-    EXPECT_EQ(readers.count(name), 1u) << failure;
-    EXPECT_NE(failure.find(broken), std::string::npos) << failure;
-    EXPECT_FALSE(fs::exists(PathsOf(workspace_, name, kPhotometricType).depth)) << name;
+  EXPECT_EQ(summary.done, 6) << log_.str();
+  ASSERT_EQ(summary.failures.size(), 1u);
+  EXPECT_EQ(summary.failures[0].rfind(broken + ": ", 0), 0u) << summary.failures[0];
+  EXPECT_NE(summary.failures[0].find("not an image in a supported format"), std::string::npos);
+  EXPECT_FALSE(fs::exists(PathsOf(workspace_, broken, kPhotometricType).depth));
+  const auto failed = colmap_io::ReadViewRecord(colmap_io::ViewRecordPath(workspace_, broken));
+  ASSERT_TRUE(failed.has_value());
+  EXPECT_EQ(failed->failure, summary.failures[0].substr(broken.size() + 2));
+  // The reason once, then only the name.
+  const std::string reason = "; source " + broken + " left out: " +
+                             workspace_.ImagePath(broken).string() + ": not an image";
+  const std::string log = log_.str();
+  EXPECT_NE(log.find(reason), std::string::npos) << log;
+  EXPECT_EQ(log.find(reason, log.find(reason) + 1), std::string::npos) << log;
+  for (const auto& [name, sources] : sources_left) {
+    EXPECT_TRUE(PathsOf(workspace_, name, kPhotometricType).AllExist()) << name;
+    const auto record = colmap_io::ReadViewRecord(colmap_io::ViewRecordPath(workspace_, name));
+    ASSERT_TRUE(record.has_value()) << name;
+    EXPECT_EQ(record->num_sources, sources) << name;
+    const std::size_t line = log.find("] " + name + " (");
+    ASSERT_NE(line, std::string::npos) << log;
+    EXPECT_NE(log.substr(line, log.find('\n', line) - line).find("; source " + broken + " left out: "),
+              std::string::npos)
+        << name;
   }
 }
 
