@@ -2,9 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <stdexcept>
 #include <fstream>
 #include <limits>
+#include <stdexcept>
 #include <string>
 #include <system_error>
 
@@ -190,18 +190,23 @@ ResizedImage ResizeToMaxImageSize(const cv::Mat& image, const Eigen::Matrix3d& K
   return result;
 }
 
-ResizedImage ReadImageForCamera(const std::filesystem::path& path, const Camera& camera,
-                                int max_image_size) {
-  const Eigen::Matrix3d K = camera.CalibrationMatrix();
-  ImageLimits limits;
+ImageLimits ImageLimitsForCamera(const std::filesystem::path& path, const Camera& camera) {
   if (camera.width < 1 || camera.height < 1 || camera.width > (1u << 24) ||
       camera.height > (1u << 24)) {
     throw IoError(path.string(), "camera " + std::to_string(camera.camera_id) + " has size " +
                                      std::to_string(camera.width) + "x" +
                                      std::to_string(camera.height) + ", no image can match it");
   }
+  ImageLimits limits;
   limits.expected_size = cv::Size(static_cast<int>(camera.width), static_cast<int>(camera.height));
   limits.expected_size_of = "camera " + std::to_string(camera.camera_id);
+  return limits;
+}
+
+ResizedImage ReadImageForCamera(const std::filesystem::path& path, const Camera& camera,
+                                int max_image_size) {
+  const Eigen::Matrix3d K = camera.CalibrationMatrix();
+  ImageLimits limits = ImageLimitsForCamera(path, camera);
   limits.size_mismatch_hint = "dense MVS needs the undistorted images";
   return ResizeToMaxImageSize(ReadImageRgb(path, limits), K, max_image_size);
 }

@@ -82,6 +82,11 @@ struct ResizedImage {
 ResizedImage ResizeToMaxImageSize(const cv::Mat& image, const Eigen::Matrix3d& K,
                                   int max_image_size);
 
+// The limits of an image taken with `camera`: its size expected, said as
+// "camera ID" in a message. Throws IoError naming `path` for a camera whose
+// size no image can have (0, or a side above 2^24).
+ImageLimits ImageLimitsForCamera(const std::filesystem::path& path, const Camera& camera);
+
 // ReadImageRgb with the camera's size as the expected size (dense MVS needs
 // undistorted images matching their camera: IoError naming `path` otherwise,
 // before the pixels are decoded) + ResizeToMaxImageSize with

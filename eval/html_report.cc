@@ -304,13 +304,10 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
     // must not end the report, nor the run that writes it.
     cv::Mat picture;
     try {
-      const colmap_io::Camera& camera = model.cameras.at(image->camera_id);
-      colmap_io::ImageLimits limits;
-      limits.expected_size =
-          cv::Size(static_cast<int>(camera.width), static_cast<int>(camera.height));
-      limits.expected_size_of = "its camera";
+      const fs::path image_path = workspace.ImagePath(image->name);
       cv::Mat rgb;
-      colmap_io::ReadImageRgb(workspace.ImagePath(image->name), limits)
+      colmap_io::ReadImageRgb(image_path, colmap_io::ImageLimitsForCamera(
+                                              image_path, model.cameras.at(image->camera_id)))
           .convertTo(rgb, CV_8UC3, 255.0);
       cv::cvtColor(rgb, picture, cv::COLOR_RGB2BGR);
     } catch (const colmap_io::IoError&) {

@@ -19,20 +19,28 @@ struct RowSums {
   SourcePixelCounts source_pixels;
 };
 
-// The depth and source-pixel sums of `depth` (valid where > 0) over the
-// reference pixels of `band` ([1,1,H,W] bool) that have ground truth.
-RowSums Score(const TrainingBatch& batch, const torch::Tensor& depth, const torch::Tensor& band) {
+// Adds the depth and source-pixel sums of `depth` (valid where > 0) over the
+// reference pixels with ground truth, or only those of `band` ([1,1,H,W]
+// bool) when it is defined.
+void AddScores(const TrainingBatch& batch, const torch::Tensor& depth, const torch::Tensor& band,
+               RowSums* sums) {
   const torch::Tensor valid = depth > 0;
-  const torch::Tensor gt_valid = batch.gt_valid & band;
-  // The reference's ground truth outside the band reads "no depth", so that
-  // only the band's pixels are looked at from the sources.
-  torch::Tensor gt_depths = batch.gt_depths.clone();
-  gt_depths.select(1, 0).mul_(band.to(gt_depths.dtype()));
-  RowSums sums;
-  sums.depth = SumValidationDepth(depth, valid, batch.gt_depth, gt_valid);
-  sums.source_pixels = CountSourcePixels(gt_depths, batch.input.intrinsics,
-                                         batch.input.extrinsics, depth, valid);
-  return sums;
+  torch::Tensor gt_valid = batch.gt_valid, gt_depths = batch.gt_depths;
+  if (band.defined()) {
+    gt_valid = gt_valid & band;
+    // The reference's ground truth outside the band reads "no depth", so that
+    // only the band's pixels are looked at from the sources.
+    gt_depths = gt_depths.clone();
+    gt_depths.select(1, 0).mul_(band.to(gt_depths.dtype()));
+  }
+  sums->depth += SumValidationDepth(depth, valid, batch.gt_depth, gt_valid);
+  sums->source_pixels += CountSourcePixels(gt_depths, batch.input.intrinsics,
+                                           batch.input.extrinsics, depth, valid);
+}
+
+// Depth from the network's inverse depth, 0 where it has none.
+torch::Tensor DepthOf(const torch::Tensor& inv_depth) {
+  return torch::where(inv_depth > 0, inv_depth.reciprocal(), torch::zeros_like(inv_depth));
 }
 
 // Local texture of the reference image: the magnitude of the grey image's
@@ -70,63 +78,42 @@ BreakdownRow Finish(const std::string& label, const RowSums& sums) {
 
 ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
                                const TrainOptions& options, double widening) {
-  if (widening == 0 && net->config().NeedsDepthRange()) {
-    throw std::invalid_argument("weights of config '" + net->config().name +
-                                "' need a depth-range hint: no breakdown without one");
-  }
+  internal::CheckHintAvailable(net, widening, "no breakdown without one");
+  // config() holds the iterations the passes run with (set_iterations).
+  const int64_t coarse_count = net->config().coarse_iterations;
+  const size_t iteration_count = static_cast<size_t>(coarse_count + net->config().fine_iterations);
   // Training mode keeps every iteration's output (DispMvsOutput::inv_depths);
   // it changes nothing else in a forward pass. No gradient is needed.
   const bool was_training = net->is_training();
   net->train();
   torch::NoGradGuard no_grad;
-  std::vector<RowSums> iterations, texture(3), depth(3);
+  std::vector<RowSums> iterations(iteration_count), texture(3), depth(3);
   for (size_t i = 0; i < scenes.size(); ++i) {
     const TrainingBatch batch = MakeBatch({scenes[i]}, widening);
     // The seeds of the validation table (validation.cc), so the last
     // iteration is that table's output.
     const auto output =
         net->forward(batch.input, internal::CpuGenerator(options.validation_seed_base + i));
-    if (iterations.empty()) iterations.resize(output.inv_depths.size());
-    if (output.inv_depths.size() != iterations.size()) {
-      throw std::logic_error("the network returned another number of iterations");
+    if (output.inv_depths.size() != iteration_count) {
+      throw std::logic_error("the network returned another number of iterations than it runs");
     }
-    const torch::Tensor all = torch::ones_like(batch.gt_valid);
-    for (size_t k = 0; k < iterations.size(); ++k) {
-      const torch::Tensor inv = output.inv_depths[k];
-      const torch::Tensor iteration_depth =
-          torch::where(inv > 0, inv.reciprocal(), torch::zeros_like(inv));
-      const RowSums sums = Score(batch, iteration_depth, all);
-      iterations[k].depth += sums.depth;
-      iterations[k].source_pixels += sums.source_pixels;
+    for (size_t k = 0; k < iteration_count; ++k) {
+      AddScores(batch, DepthOf(output.inv_depths[k]), torch::Tensor(), &iterations[k]);
     }
-    const torch::Tensor& final_inv = output.inv_depths.back();
-    const torch::Tensor final_depth =
-        torch::where(final_inv > 0, final_inv.reciprocal(), torch::zeros_like(final_inv));
+    const torch::Tensor final_depth = DepthOf(output.inv_depths.back());
     const auto texture_bands = Thirds(LocalTexture(batch.input.images), batch.gt_valid);
     const auto depth_bands = Thirds(batch.gt_depth, batch.gt_valid);
-    for (size_t b = 0; b < texture_bands.size(); ++b) {
-      const RowSums t = Score(batch, final_depth, texture_bands[b]);
-      texture[b].depth += t.depth;
-      texture[b].source_pixels += t.source_pixels;
-    }
-    for (size_t b = 0; b < depth_bands.size(); ++b) {
-      const RowSums d = Score(batch, final_depth, depth_bands[b]);
-      depth[b].depth += d.depth;
-      depth[b].source_pixels += d.source_pixels;
+    for (size_t b = 0; b < 3; ++b) {
+      AddScores(batch, final_depth, texture_bands[b], &texture[b]);
+      AddScores(batch, final_depth, depth_bands[b], &depth[b]);
     }
   }
   net->train(was_training);
 
   ErrorBreakdown breakdown;
-  // config() holds the iterations the passes ran with (set_iterations).
-  const int64_t coarse_count = net->config().coarse_iterations;
-  if (static_cast<int64_t>(iterations.size()) != coarse_count + net->config().fine_iterations) {
-    throw std::logic_error("the network returned another number of iterations than it runs");
-  }
-  for (int64_t k = 0; k < static_cast<int64_t>(iterations.size()); ++k) {
-    const bool is_coarse = k < coarse_count;
-    const std::string label = is_coarse ? "coarse " + std::to_string(k + 1)
-                                        : "fine " + std::to_string(k - coarse_count + 1);
+  for (int64_t k = 0; k < static_cast<int64_t>(iteration_count); ++k) {
+    const std::string label = k < coarse_count ? "coarse " + std::to_string(k + 1)
+                                               : "fine " + std::to_string(k - coarse_count + 1);
     breakdown.iterations.push_back(Finish(label, iterations[static_cast<size_t>(k)]));
   }
   const char* texture_names[] = {"texture weak", "texture medium", "texture strong"};

@@ -68,46 +68,45 @@ scored() { awk -F'\t' -v s="$2" -v o="$3" '$1 == s && $2 == o { found = 1 } END 
 for f in "${files[@]}"; do
   name=$(basename "$f" .safetensors)
   step=$((10#${name##*-}))
+  # selection.txt lines: STEP<TAB>OPTIONS<TAB>the x=1 line of --evaluate;
   # selection_realval.txt lines: STEP<TAB>SIGNATURE<TAB>mean <2 % over the mvs_* pairs.
-  if [ -n "$realval" ] && ! scored "$realval_scores" "$step" "$realval_signature"; then
-    copy=$(mktemp "$dir/.scoring-XXXXXX.safetensors")
-    if cp "$f" "$copy" 2>/dev/null; then
-      pairs=$(mktemp -d "$dir/.realval-XXXXXX")
-      if ! "$root/bench/realval_eval.sh" "$build" "$realval" "$pairs" --pairs 'mvs_*' -- \
-          --model_path "$copy" --mode photometric --threads 2 --device "$device" \
-          > "$pairs/table.txt" 2>&1; then
-        cat "$pairs/table.txt" >&2
-        rm -rf "$copy" "$pairs"
-        echo "error: running $f on $realval failed" >&2
-        exit 1
-      fi
-      mean=$(awk -F'\t' 'NR > 1 && $2 == "dispmvs.photometric" { s += $4; n++ } END { if (n) printf "%.4f", s / n }' "$pairs/summary.tsv")
-      rm -rf "$copy" "$pairs"
-      [ -n "$mean" ] || { echo "error: no realval score for $f" >&2; exit 1; }
-      printf '%s\t%s\t%s\n' "$step" "$realval_signature" "$mean" >> "$realval_scores"
-      echo "scored step $step on $realval: $mean" >&2
-    else
-      rm -f "$copy"
-    fi
-  fi
-  # selection.txt lines: STEP<TAB>OPTIONS<TAB>the x=1 line of --evaluate.
-  if scored "$scores" "$step" "$signature"; then
-    continue
-  fi
-  # A checkpoint can be replaced while it is read (training goes on): copy it first.
+  need_generated=1 need_real=0
+  ! scored "$scores" "$step" "$signature" || need_generated=0
+  [ -z "$realval" ] || scored "$realval_scores" "$step" "$realval_signature" || need_real=1
+  [ $need_generated = 1 ] || [ $need_real = 1 ] || continue
+  # A checkpoint can be replaced while it is read (training goes on): copy it
+  # first, once, so that both scores are of the same weights.
   copy=$(mktemp "$dir/.scoring-XXXXXX.safetensors")
   if ! cp "$f" "$copy" 2>/dev/null; then rm -f "$copy"; continue; fi
-  if ! out=$("$train" --evaluate "$copy" "${options[@]}" 2>&1); then
-    rm -f "$copy"
-    echo "error: evaluating $f failed:" >&2
-    echo "$out" >&2
-    exit 1
+  if [ $need_real = 1 ]; then
+    pairs=$(mktemp -d "$dir/.realval-XXXXXX")
+    if ! "$root/bench/realval_eval.sh" "$build" "$realval" "$pairs" --pairs 'mvs_*' -- \
+        --model_path "$copy" --mode photometric --threads 2 --device "$device" \
+        > "$pairs/table.txt" 2>&1; then
+      cat "$pairs/table.txt" >&2
+      rm -rf "$copy" "$pairs"
+      echo "error: running $f on $realval failed" >&2
+      exit 1
+    fi
+    mean=$(awk -F'\t' 'NR > 1 && $2 == "dispmvs.photometric" { s += $4; n++ } END { if (n) printf "%.4f", s / n }' "$pairs/summary.tsv")
+    rm -rf "$pairs"
+    [ -n "$mean" ] || { rm -f "$copy"; echo "error: no realval score for $f" >&2; exit 1; }
+    printf '%s\t%s\t%s\n' "$step" "$realval_signature" "$mean" >> "$realval_scores"
+    echo "scored step $step on $realval: $mean" >&2
+  fi
+  if [ $need_generated = 1 ]; then
+    if ! out=$("$train" --evaluate "$copy" "${options[@]}" 2>&1); then
+      rm -f "$copy"
+      echo "error: evaluating $f failed:" >&2
+      echo "$out" >&2
+      exit 1
+    fi
+    line=$(grep '^x=1' <<< "$out" | head -1)
+    [ -n "$line" ] || { rm -f "$copy"; echo "error: no x=1 row when evaluating $f:" >&2; echo "$out" >&2; exit 1; }
+    printf '%s\t%s\t%s\n' "$step" "$signature" "$line" >> "$scores"
+    echo "scored step $step" >&2
   fi
   rm -f "$copy"
-  line=$(grep '^x=1' <<< "$out" | head -1)
-  [ -n "$line" ] || { echo "error: no x=1 row when evaluating $f:" >&2; echo "$out" >&2; exit 1; }
-  printf '%s\t%s\t%s\n' "$step" "$signature" "$line" >> "$scores"
-  echo "scored step $step" >&2
 done
 
 # The table: every step scored with these options, in step order, the best in

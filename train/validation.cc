@@ -2,6 +2,8 @@
 
 #include <ATen/CPUGeneratorImpl.h>
 
+#include <stdexcept>
+#include <string>
 #include <utility>
 
 #include "model/matching_loss.h"
@@ -44,10 +46,7 @@ std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vec
 // `source_pixels` (source_pixel_metrics.h).
 WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
                              const TrainOptions& options, double widening, bool look_from_sources) {
-  if (widening == 0 && net->config().NeedsDepthRange()) {
-    throw std::invalid_argument("weights of config '" + net->config().name +
-                                "' need a depth-range hint: no 'none' row for them");
-  }
+  CheckHintAvailable(net, widening, "no 'none' row for them");
   const bool was_training = net->is_training();
   net->eval();
   torch::NoGradGuard no_grad;
@@ -80,6 +79,13 @@ WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSamp
 
 torch::Generator CpuGenerator(uint64_t seed) {
   return at::make_generator<at::CPUGeneratorImpl>(seed);
+}
+
+void CheckHintAvailable(DispMvsNet& net, double widening, const std::string& consequence) {
+  if (widening == 0 && net->config().NeedsDepthRange()) {
+    throw std::invalid_argument("weights of config '" + net->config().name +
+                                "' need a depth-range hint: " + consequence);
+  }
 }
 
 std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, torch::Device device) {

@@ -8,6 +8,7 @@
 // Internal to train/: the public interface is trainer.h.
 
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include <torch/torch.h>
@@ -20,6 +21,11 @@ namespace dispmvs::train::internal {
 
 // A CPU generator seeded with `seed`: the network's random initialisation in a forward pass.
 torch::Generator CpuGenerator(uint64_t seed);
+
+// Throws std::invalid_argument ("weights of config 'NAME' need a depth-range
+// hint: " + `consequence`) when `widening` is 0 (no hint) and the weights
+// need one.
+void CheckHintAvailable(model::DispMvsNet& net, double widening, const std::string& consequence);
 
 // The validation scenes of `options` (its size, view count, scene count and seed base).
 std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, torch::Device device);
