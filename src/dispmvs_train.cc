@@ -76,6 +76,9 @@ options (default):
   --matching_loss_weight W    v2: weight of the matching loss (cross-entropy along the epipolar
                               segment, coarse and fine) added to the depth loss (0.5)
   --matching_warmup_steps K   v2: the first K steps train with the matching loss alone (0)
+  --depth_loss L              inverse: the paper's L1 of range-normalised inverse depth, which
+                              weighs a relative error at depth d by d_min / d; log: L1 of log
+                              depth, every pixel's relative error alike (inverse)
   --scene_reuse R             each generated scene serves R consecutive steps, each time with
                               another view as the reference (1)
   --difficulty_start D        curriculum: generated scenes start at difficulty D in [0, 1] (smaller
@@ -215,6 +218,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--init_weights") o.init_weights = value;
     else if (flag == "--matching_loss_weight") o.matching_loss_weight = ParseDouble(flag, value);
     else if (flag == "--matching_warmup_steps") o.matching_warmup_steps = ParseInt(flag, value);
+    else if (flag == "--depth_loss") o.depth_loss = value;
     else if (flag == "--scene_reuse") o.scene_reuse = ParseInt(flag, value);
     else if (flag == "--eval_coarse_iterations") o.eval_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--eval_fine_iterations") o.eval_fine_iterations = ParseInt(flag, value);

@@ -119,6 +119,11 @@ void TrainOptions::Check(bool for_training) const {
   if (!(std::isfinite(matching_loss_weight) && matching_loss_weight >= 0)) {
     fail("matching_loss_weight must be a finite number >= 0, got " + std::to_string(matching_loss_weight));
   }
+  try {
+    model::ParseDepthLoss(depth_loss);
+  } catch (const std::invalid_argument& e) {
+    fail(std::string("depth_loss: ") + e.what());
+  }
   if (matching_warmup_steps < 0) {
     fail("matching_warmup_steps must be >= 0, got " + std::to_string(matching_warmup_steps));
   }
@@ -215,9 +220,13 @@ struct StepLoss {
 StepLoss ComputeStepLoss(const TrainOptions& options, const model::DispMvsOutput& output,
                          const TrainingBatch& batch, double widening, bool matching_loss, int64_t step) {
   StepLoss result;
-  // Normalised by the unwidened range (see TrainOptions::train_widening_max).
-  result.depth_loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
-                                          batch.input.depth_min * widening, batch.input.depth_max / widening);
+  if (model::ParseDepthLoss(options.depth_loss) == model::DepthLoss::kLog) {
+    result.depth_loss = model::LogDepthSequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid);
+  } else {
+    // Normalised by the unwidened range (see TrainOptions::train_widening_max).
+    result.depth_loss = model::SequenceLoss(output.inv_depths, batch.gt_depth, batch.gt_valid,
+                                            batch.input.depth_min * widening, batch.input.depth_max / widening);
+  }
   result.loss = result.depth_loss;
   if (!matching_loss) return result;
   torch::Tensor match_loss = torch::zeros({}, result.depth_loss.options());

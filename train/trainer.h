@@ -84,6 +84,10 @@ struct TrainOptions {
   // loss; and the first steps train with the matching loss alone (the
   // features learn to match before the GRU learns to refine).
   double matching_loss_weight = 0.5;
+  // The depth loss (model/loss.h): "inverse", the paper's L1 of
+  // range-normalised inverse depth, or "log", L1 of log depth (the relative
+  // error every pixel alike, which the < 2 % metric counts). A run setting.
+  std::string depth_loss = "inverse";
   int64_t matching_warmup_steps = 0;
   // Each generated scene serves this many consecutive steps, each time with
   // another of its views as the reference (the others its sources): the
