@@ -60,8 +60,8 @@ std::optional<ViewClaim> ClaimGeometricAndFusion(const Workspace& workspace,
 }
 
 FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
-                        const fusion::GeometricFilterOptions& options, const fs::path& ply_path,
-                        std::ostream& log, std::size_t max_cache_bytes) {
+                        const fusion::FusionOptions& options, const fs::path& ply_path,
+                        std::ostream& log, std::size_t max_cache_bytes, const ImageMasks& masks) {
   options.Check();
   const auto start = Clock::now();
   const std::vector<image_t> image_ids = FusionImageOrder(workspace, plan);
@@ -95,12 +95,14 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
     }
   }
   std::vector<bool> usable(view_images.size(), false);
+  std::size_t pixels = 0, masked_pixels = 0;
   auto load = [&](int index) -> std::shared_ptr<const fusion::FusionView> {
     const image_t image_id = view_images[static_cast<std::size_t>(index)];
     const std::string& name = plan.ImageOf(image_id).name;
     try {
       auto view = std::make_shared<fusion::FusionView>();
       view->geometry = LoadDepthView(workspace, plan, image_id, kPhotometricType);
+      const std::size_t ignored = masks.Apply(name, &view->geometry);
       view->normals = ReadNormalsMatching(PathsOf(workspace, name, kPhotometricType).normal,
                                           view->geometry.depth);
       const ResizedImage full = ReadFullImage(workspace, plan, image_id);
@@ -114,6 +116,10 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
         view->min_consistent_views = lowered->second;
       }
       view->source_views = sources_of[static_cast<std::size_t>(index)];
+      if (!usable[static_cast<std::size_t>(index)]) {  // counted at the first load only
+        pixels += view->geometry.depth.size();
+        masked_pixels += ignored;
+      }
       usable[static_cast<std::size_t>(index)] = true;
       return view;
     } catch (const std::exception& error) {
@@ -133,6 +139,8 @@ FusionSummary RunFusion(const Workspace& workspace, const DensePlan& plan,
   summary.num_images = static_cast<int>(std::count(usable.begin(), usable.end(), true));
   summary.map_loads = cache.loads();
   summary.peak_cache_bytes = cache.peak_bytes();
+  summary.pixels = pixels;
+  summary.masked_pixels = masked_pixels;
   summary.seconds = SecondsSince(start);
   log << "fusion: " << summary.num_points << " points from " << summary.num_images << " image(s) -> "
       << ply_path.string() << " (+ .vis), " << FormatSeconds(summary.seconds) << "; "

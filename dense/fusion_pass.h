@@ -11,9 +11,10 @@
 #include <vector>
 
 #include "colmap_io/workspace.h"
+#include "dense/image_masks.h"
 #include "dense/plan.h"
 #include "dense/view_claim.h"
-#include "fusion/geometric_filter.h"
+#include "fusion/point_fusion.h"
 
 namespace dispmvs::dense {
 
@@ -22,6 +23,9 @@ struct FusionSummary {
   int num_images = 0;  // with usable maps
   std::size_t map_loads = 0;  // reads of a view's maps and image (>= num_images)
   std::size_t peak_cache_bytes = 0;
+  // Pixels of the usable images, and how many of them their masks ignore.
+  std::size_t pixels = 0;
+  std::size_t masked_pixels = 0;
   double seconds = 0;
 };
 
@@ -54,10 +58,12 @@ std::optional<ViewClaim> ClaimGeometricAndFusion(
 // plan.min_consistent_views applies as in RunGeometricPass. Maps are read
 // when needed and at most `max_cache_bytes` of them kept
 // (fusion/view_cache.h), so memory does not grow with the number of images
-// (beyond one byte per pixel per image).
+// (beyond one byte per pixel per image). Pixels `masks` ignore are as if
+// they had no depth (image_masks.h).
 FusionSummary RunFusion(const colmap_io::Workspace& workspace, const DensePlan& plan,
-                        const fusion::GeometricFilterOptions& options,
+                        const fusion::FusionOptions& options,
                         const std::filesystem::path& ply_path, std::ostream& log,
-                        std::size_t max_cache_bytes = kDefaultFusionCacheBytes);
+                        std::size_t max_cache_bytes = kDefaultFusionCacheBytes,
+                        const ImageMasks& masks = {});
 
 }  // namespace dispmvs::dense

@@ -17,7 +17,8 @@ namespace fs = std::filesystem;
 using namespace colmap_io;
 
 PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
-                             const fusion::GeometricFilterOptions& options, std::ostream& log) {
+                             const fusion::GeometricFilterOptions& options, std::ostream& log,
+                             const ImageMasks& masks) {
   options.Check();
   const auto start = Clock::now();
   PassSummary summary;
@@ -31,7 +32,9 @@ PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
       continue;
     }
     try {
-      const fusion::DepthView ref = LoadDepthView(workspace, plan, reference, kPhotometricType);
+      fusion::DepthView ref = LoadDepthView(workspace, plan, reference, kPhotometricType);
+      const double photometric_share = ValidFraction(ref.depth);
+      const std::size_t ignored = masks.Apply(name, &ref);
       // A source whose map cannot be read is left out, as fusion leaves it
       // out: it fails its own view, not every view that lists it.
       std::vector<fusion::DepthView> sources;
@@ -40,6 +43,7 @@ PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
         if (!fs::is_regular_file(PathsOf(workspace, source_name, kPhotometricType).depth)) continue;
         try {
           sources.push_back(LoadDepthView(workspace, plan, source, kPhotometricType));
+          masks.Apply(source_name, &sources.back());
         } catch (const std::exception& error) {
           log << "geometric: " << name << ": source " << source_name
               << " left out: " << error.what() << '\n';
@@ -68,7 +72,11 @@ PassSummary RunGeometricPass(const Workspace& workspace, const DensePlan& plan,
       ++summary.done;
       log << "geometric: " << name << ": " << sources.size() << " source map(s), kept "
           << Percent(ValidFraction(result.depth)) << " of pixels (photometric "
-          << Percent(ValidFraction(ref.depth)) << ")\n"
+          << Percent(photometric_share);
+      if (ignored > 0) {
+        log << ", the mask ignores " << Percent(static_cast<double>(ignored) / static_cast<double>(ref.depth.size()));
+      }
+      log << ")\n"
           << std::flush;  // progress a user (or a scheduler's log) can follow
     } catch (const std::exception& error) {
       summary.failures.push_back(name + ": " + error.what());

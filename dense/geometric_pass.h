@@ -8,6 +8,7 @@
 #include <ostream>
 
 #include "colmap_io/workspace.h"
+#include "dense/image_masks.h"
 #include "dense/pass_summary.h"
 #include "dense/plan.h"
 #include "fusion/geometric_filter.h"
@@ -18,10 +19,12 @@ namespace dispmvs::dense {
 // instead of options.min_consistent_views. References without a photometric
 // map count as skipped_no_sources; a reference whose own map cannot be read
 // fails, and a source whose map cannot be read is left out (with a line in
-// `log`) of the views that list it. Always recomputed (no resume): it is cheap
-// and depends on the neighbours' maps, which a later run may have added.
+// `log`) of the views that list it. Pixels `masks` ignore are neither kept
+// nor agree as a source's. Always recomputed (no resume): it is cheap and
+// depends on the neighbours' maps, which a later run may have added.
 PassSummary RunGeometricPass(const colmap_io::Workspace& workspace, const DensePlan& plan,
-                             const fusion::GeometricFilterOptions& options, std::ostream& log);
+                             const fusion::GeometricFilterOptions& options, std::ostream& log,
+                             const ImageMasks& masks = {});
 
 // Removes the temporaries (NAME.tmp-*, colmap_io/atomic_file.h) that a
 // killed run left beside the geometric maps (depth, normal, confidence) of

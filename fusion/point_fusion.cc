@@ -16,6 +16,36 @@
 #include "fusion/view_cache.h"
 
 namespace dispmvs::fusion {
+
+void FusionOptions::Check() const {
+  consistency.Check();
+  if (!(max_normal_error >= 0 && max_normal_error <= 180)) {
+    throw std::invalid_argument("max_normal_error must be in [0, 180] degrees, got " +
+                                std::to_string(max_normal_error));
+  }
+  if (max_num_pixels < 1) {
+    throw std::invalid_argument("max_num_pixels must be >= 1, got " + std::to_string(max_num_pixels));
+  }
+  if (max_num_pixels < consistency.min_consistent_views + 1) {
+    throw std::invalid_argument("max_num_pixels (" + std::to_string(max_num_pixels) +
+                                ") must be at least min_consistent_views + 1 (" +
+                                std::to_string(consistency.min_consistent_views + 1) +
+                                "): a point holds the reference pixel and the pixels it must agree with");
+  }
+  if (max_traversal_depth < 1) {
+    throw std::invalid_argument("max_traversal_depth must be >= 1, got " + std::to_string(max_traversal_depth));
+  }
+  if (check_num_images < 1) {
+    throw std::invalid_argument("check_num_images must be >= 1, got " + std::to_string(check_num_images));
+  }
+  if (bounding_box) {
+    const BoundingBox& box = *bounding_box;
+    if (!box.min.allFinite() || !box.max.allFinite() || !(box.min.array() <= box.max.array()).all()) {
+      throw std::invalid_argument("bounding_box corners must be finite with min <= max");
+    }
+  }
+}
+
 namespace {
 
 void ValidateView(const FusionView& view, std::size_t index, std::size_t num_views) {
@@ -78,6 +108,21 @@ struct ViewFrame {
   }
 };
 
+// The unit world-frame normal of a view's pixel; nullopt where the view has
+// no normals or the pixel's is zero (unknown) or not finite.
+std::optional<Eigen::Vector3d> WorldNormal(const FusionView& view, const ViewFrame& frame, int row,
+                                           int col) {
+  if (view.normals.empty()) return std::nullopt;
+  const int width = view.geometry.depth.width();
+  const std::size_t index = static_cast<std::size_t>(row) * width + col;
+  const std::size_t plane = static_cast<std::size_t>(width) * view.geometry.depth.height();
+  const float* n = view.normals.data();
+  const Eigen::Vector3d camera_normal(n[index], n[plane + index], n[2 * plane + index]);
+  const double norm = camera_normal.norm();
+  if (!(norm > 1e-6) || !std::isfinite(norm)) return std::nullopt;
+  return frame.R_transpose * (camera_normal / norm);
+}
+
 // Sums of the per-pixel contributions to one point.
 struct Accumulator {
   Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
@@ -92,18 +137,8 @@ struct Accumulator {
     xyz += frame.WorldPoint(row, col, depth);
     ++num_points;
     visibility[num_visibility++] = view.vis_index;
-    const int width = view.geometry.depth.width();
-    const std::size_t index = static_cast<std::size_t>(row) * width + col;
-    if (!view.normals.empty()) {
-      const std::size_t plane = static_cast<std::size_t>(width) * view.geometry.depth.height();
-      const float* n = view.normals.data();
-      const Eigen::Vector3d camera_normal(n[index], n[plane + index], n[2 * plane + index]);
-      const double norm = camera_normal.norm();
-      // Zero (unknown) and non-finite normals are skipped.
-      if (norm > 1e-6 && std::isfinite(norm)) {
-        normal += frame.R_transpose * (camera_normal / norm);
-      }
-    }
+    // Zero (unknown) and non-finite normals are skipped.
+    if (const auto world_normal = WorldNormal(view, frame, row, col)) normal += *world_normal;
     if (!view.image.empty()) {
       if (view.image.type() == CV_8UC3) {
         const cv::Vec3b& c = view.image.at<cv::Vec3b>(row, col);
@@ -138,7 +173,7 @@ struct Accumulator {
 }  // namespace
 
 std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
-                                   const GeometricFilterOptions& options, FusionStats* stats) {
+                                   const FusionOptions& options, FusionStats* stats) {
   // The caller holds every view already: the cache only lends them out. Each
   // view is checked when first lent (every view is, as a reference in turn).
   FusionViewCache cache(
@@ -151,7 +186,7 @@ std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
 }
 
 std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
-                                   const GeometricFilterOptions& options, FusionStats* stats) {
+                                   const FusionOptions& options, FusionStats* stats) {
   std::vector<FusedPoint> points;
   FusePoints(
       num_views, cache, options, [&points](FusedPoint&& point) { points.push_back(std::move(point)); },
@@ -173,7 +208,7 @@ std::vector<int> LastUses(const std::vector<std::vector<int>>& sources) {
   return last;
 }
 
-void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOptions& options,
+void FusePoints(int num_views, FusionViewCache* cache, const FusionOptions& options,
                 const PointSink& emit, FusionStats* stats, const std::vector<int>& last_use) {
   options.Check();
   const auto count = static_cast<std::size_t>(std::max(num_views, 0));
@@ -224,6 +259,10 @@ void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOpti
   std::vector<std::pair<int, std::shared_ptr<const FusionView>>> sources;
   std::array<PairConsistency::Match, kMaxSourceViews> matches;
   std::array<bool, kMaxSourceViews> agrees{};
+  const GeometricFilterOptions& rule = options.consistency;
+  const double min_cos_normal = std::cos(options.max_normal_error * M_PI / 180.0);
+  const bool tests_normals = options.max_normal_error < 180;
+  const int max_pixels = options.max_traversal_depth == 1 ? 1 : options.max_num_pixels;
   for (std::size_t v = 0; v < count; ++v) {
     const std::shared_ptr<const FusionView> reference_view = get(static_cast<int>(v));
     if (reference_view == nullptr) {  // left out
@@ -231,16 +270,18 @@ void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOpti
       continue;
     }
     const FusionView& reference = *reference_view;
+    const ViewFrame& reference_frame = *frames[v];
     const int min_consistent = reference.min_consistent_views >= 0
                                    ? reference.min_consistent_views
-                                   : options.min_consistent_views;
+                                   : rule.min_consistent_views;
     // Sources that cannot be loaded are left out, as if not listed.
     sources.clear();
     pairs.clear();
     for (int source : reference.source_views) {
+      if (static_cast<int>(sources.size()) >= options.check_num_images) break;
       std::shared_ptr<const FusionView> view = get(source);
       if (view == nullptr) continue;
-      pairs.emplace_back(reference.geometry, view->geometry, options);
+      pairs.emplace_back(reference.geometry, view->geometry, rule);
       sources.emplace_back(source, std::move(view));
     }
     const int width = reference.geometry.depth.width();
@@ -249,22 +290,40 @@ void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOpti
     for (int row = 0; row < height; ++row) {
       for (int col = 0; col < width; ++col) {
         const std::size_t index = static_cast<std::size_t>(row) * width + col;
-        if (!HasUsableDepth(reference.geometry, row, col, options.min_confidence)) continue;
+        if (!HasUsableDepth(reference.geometry, row, col, rule.min_confidence)) continue;
         if (consumed[v][index]) {
           if (stats != nullptr) ++stats->consumed_pixels_per_view[v];
           continue;
         }
+        if (options.bounding_box &&
+            !options.bounding_box->Contains(reference_frame.WorldPoint(row, col, depth[index]))) {
+          continue;
+        }
+        const std::optional<Eigen::Vector3d> reference_normal =
+            tests_normals ? WorldNormal(reference, reference_frame, row, col) : std::nullopt;
         int agreeing = 0;
         for (std::size_t s = 0; s < pairs.size(); ++s) {
-          agrees[s] = pairs[s].Check(row, col, depth[index], &matches[s]);
+          PairConsistency::Match& match = matches[s];
+          agrees[s] = pairs[s].Check(row, col, depth[index], &match);
+          if (agrees[s] && (options.bounding_box || reference_normal)) {
+            const FusionView& source_view = *sources[s].second;
+            const ViewFrame& source_frame = *frames[static_cast<std::size_t>(sources[s].first)];
+            if (options.bounding_box &&
+                !options.bounding_box->Contains(source_frame.WorldPoint(match.row, match.col, match.depth))) {
+              agrees[s] = false;
+            } else if (reference_normal) {
+              const auto source_normal = WorldNormal(source_view, source_frame, match.row, match.col);
+              if (source_normal && reference_normal->dot(*source_normal) < min_cos_normal) agrees[s] = false;
+            }
+          }
           agreeing += agrees[s] ? 1 : 0;
         }
         if (agreeing < min_consistent) continue;
 
         Accumulator sum;
-        sum.Add(reference, *frames[v], row, col, depth[index]);
+        sum.Add(reference, reference_frame, row, col, depth[index]);
         consumed[v][index] = 1;
-        for (std::size_t s = 0; s < pairs.size(); ++s) {
+        for (std::size_t s = 0; s < pairs.size() && sum.num_points < max_pixels; ++s) {
           if (!agrees[s]) continue;
           const auto source = static_cast<std::size_t>(sources[s].first);
           const FusionView& source_view = *sources[s].second;

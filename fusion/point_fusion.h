@@ -11,9 +11,11 @@
 #include <cstdint>
 #include <functional>
 #include <opencv2/core.hpp>
+#include <optional>
 #include <vector>
 
 #include "colmap_io/dense_array.h"
+#include "fusion/bounding_box.h"
 #include "fusion/fused_point.h"
 #include "fusion/geometric_filter.h"
 
@@ -40,6 +42,44 @@ struct FusionView {
   int min_consistent_views = -1;
 };
 
+// What fusion does beyond the consistency rule: COLMAP's StereoFusion options
+// that mean something for fusion of this kind (docs/colmap-options.md). The
+// defaults here change nothing (a fusion of the consistency rule alone);
+// dispmvs_colmap sets its own.
+struct FusionOptions {
+  GeometricFilterOptions consistency;
+  // Degrees: an agreeing source pixel is fused only if its world normal lies
+  // within this angle of the reference pixel's (where both have one), as
+  // COLMAP tests each pixel against the first of a point. 180 = no test.
+  double max_normal_error = 180;
+  // Pixels averaged into one point at most: the reference's, then agreeing
+  // sources in list order. Agreeing sources past it still count towards
+  // min_consistent_views but are neither averaged nor consumed (COLMAP stops
+  // its traversal there and leaves them for later points too).
+  int max_num_pixels = 10000;
+  // COLMAP's traversal depth: 1 keeps every point at its reference pixel
+  // alone (agreement is still required); 2 or more is this fusion, which
+  // never goes beyond a reference's direct sources.
+  int max_traversal_depth = 100;
+  // Sources each reference is checked against at most: the first N of its
+  // list (the plan lists the most overlapping first).
+  int check_num_images = 50;
+  // Pixels whose 3-D point lies outside are used for nothing: no point at a
+  // reference pixel outside, and a source pixel outside does not agree.
+  std::optional<BoundingBox> bounding_box;
+
+  FusionOptions() = default;
+  // Implicit on purpose: the consistency rule alone is a complete request.
+  FusionOptions(const GeometricFilterOptions& rule) : consistency(rule) {}  // NOLINT
+
+  // Throws std::invalid_argument naming the first bad field (as
+  // GeometricFilterOptions::Check, and: max_normal_error in [0, 180],
+  // max_num_pixels >= 1 and >= min_consistent_views + 1 (a point needs the
+  // pixels it must agree with), max_traversal_depth and check_num_images
+  // >= 1, box corners finite with min <= max).
+  void Check() const;
+};
+
 // What FusePoints did, per view (same order as the views).
 struct FusionStats {
   // Points emitted with the view as the reference.
@@ -63,13 +103,15 @@ struct FusionStats {
 //   visibility sorted unique vis_index of the reference and agreeing sources.
 // The agreeing source pixels are marked consumed. Consumed pixels still serve
 // as sources (agreement and averaging); they are only never references.
+// FusionOptions adds COLMAP's tests on top: the bounding box, the normal
+// angle, the most pixels per point and the sources checked.
 //
 // Throws std::invalid_argument for invalid options or views (bad geometry,
 // maps of the wrong size or channel count, an image of another type or size,
 // source indices out of range, repeated, pointing at the view itself or more
 // than kMaxSourceViews, a min_consistent_views outside [-1, kMaxSourceViews]).
 std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
-                                   const GeometricFilterOptions& options,
+                                   const FusionOptions& options,
                                    FusionStats* stats = nullptr);
 
 class FusionViewCache;  // fusion/view_cache.h
@@ -82,7 +124,7 @@ class FusionViewCache;  // fusion/view_cache.h
 // view is checked as above when first loaded. Gives the points of the
 // vector form for the same usable views.
 std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
-                                   const GeometricFilterOptions& options,
+                                   const FusionOptions& options,
                                    FusionStats* stats = nullptr);
 
 // The same, each point handed to `emit` as soon as it is made, in the same
@@ -94,7 +136,7 @@ std::vector<FusedPoint> FusePoints(int num_views, FusionViewCache* cache,
 // grow with the number of views at all. A view asked for after its last use
 // is a std::logic_error.
 using PointSink = std::function<void(FusedPoint&&)>;
-void FusePoints(int num_views, FusionViewCache* cache, const GeometricFilterOptions& options,
+void FusePoints(int num_views, FusionViewCache* cache, const FusionOptions& options,
                 const PointSink& emit, FusionStats* stats = nullptr,
                 const std::vector<int>& last_use = {});
 

@@ -320,5 +320,125 @@ TEST(PointFusionTest, RejectsBadViews) {
   EXPECT_NO_THROW(FusePoints(views, options));
 }
 
+// COLMAP's options beyond the consistency rule (FusionOptions).
+
+TEST(FusionOptionsTest, NormalTestDropsASourceWhoseNormalsDisagree) {
+  SceneViews s;
+  FusionOptions options;
+  options.max_normal_error = 10;
+  const std::vector<FusedPoint> exact_normals = FusePoints(s.views, options);
+  const std::vector<FusedPoint> no_test = FusePoints(s.views, GeometricFilterOptions());
+  // Exact normals agree: only pixels matched across the planes' edge differ.
+  EXPECT_NEAR(static_cast<double>(exact_normals.size()), static_cast<double>(no_test.size()),
+              0.01 * static_cast<double>(no_test.size()));
+  // Turn view 3's normals 30 degrees about its camera's x axis: with a 10
+  // degree test it agrees with no other view, so no point lists it; without
+  // the test, thousands do.
+  const Eigen::Matrix3d turn =
+      Eigen::AngleAxisd(30.0 * M_PI / 180.0, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  colmap_io::DenseArray& normals = s.views[3].normals;
+  const std::size_t plane = static_cast<std::size_t>(normals.width()) * normals.height();
+  for (std::size_t i = 0; i < plane; ++i) {
+    float* n = normals.data();
+    const Eigen::Vector3d turned = turn * Eigen::Vector3d(n[i], n[plane + i], n[2 * plane + i]);
+    for (int c = 0; c < 3; ++c) n[c * plane + i] = static_cast<float>(turned[c]);
+  }
+  auto listing_view_3 = [&](const std::vector<FusedPoint>& points) {
+    return std::count_if(points.begin(), points.end(), [&](const FusedPoint& point) {
+      return std::binary_search(point.visibility.begin(), point.visibility.end(), s.vis_indices[3]);
+    });
+  };
+  EXPECT_EQ(listing_view_3(FusePoints(s.views, options)), 0);
+  EXPECT_GT(listing_view_3(FusePoints(s.views, GeometricFilterOptions())), 1000);
+  options.max_normal_error = 35;  // wider than the turn: it agrees again
+  EXPECT_GT(listing_view_3(FusePoints(s.views, options)), 1000);
+}
+
+TEST(FusionOptionsTest, MaxPixelsTraversalDepthAndSourcesChecked) {
+  const SceneViews s;
+  const std::vector<FusedPoint> plain = FusePoints(s.views, GeometricFilterOptions());
+
+  // At most 3 pixels per point (reference + 2 sources): fewer pixels are
+  // consumed per point, so there are more points.
+  FusionOptions options;
+  options.max_num_pixels = 3;
+  const std::vector<FusedPoint> capped = FusePoints(s.views, options);
+  for (const FusedPoint& point : capped) ASSERT_LE(point.visibility.size(), 3u);
+  EXPECT_GT(capped.size(), plain.size());
+
+  // Traversal depth 1: every point is its reference pixel alone, exactly on
+  // the surface; agreement is still required.
+  options = FusionOptions();
+  options.max_traversal_depth = 1;
+  const std::vector<FusedPoint> single = FusePoints(s.views, options);
+  ASSERT_GT(single.size(), plain.size());
+  for (const FusedPoint& point : single) {
+    ASSERT_EQ(point.visibility.size(), 1u);
+    ASSERT_GE(PlaneOf(s.scene, point.xyz.cast<double>(), 1e-5), 0);
+  }
+  options.consistency.min_consistent_views = 4;  // more than the 3 sources
+  options.max_num_pixels = 5;
+  EXPECT_TRUE(FusePoints(s.views, options).empty());
+
+  // Each reference checks only its first 2 sources: view 0's points list
+  // views 0, 1 and 2 at most.
+  options = FusionOptions();
+  options.check_num_images = 2;
+  FusionStats stats;
+  const std::vector<FusedPoint> first_two = FusePoints(s.views, options, &stats);
+  ASSERT_GT(stats.points_per_view[0], 1000u);
+  for (std::size_t i = 0; i < stats.points_per_view[0]; ++i) {
+    for (uint32_t index : first_two[i].visibility) {
+      ASSERT_NE(index, s.vis_indices[3]);
+    }
+  }
+}
+
+TEST(FusionOptionsTest, BoundingBoxLeavesOutPixelsOutside) {
+  const SceneViews s;
+  const std::vector<FusedPoint> plain = FusePoints(s.views, GeometricFilterOptions());
+  Eigen::Vector3d low = Eigen::Vector3d::Constant(1e9), high = -low;
+  for (const FusedPoint& point : plain) {
+    low = low.cwiseMin(point.xyz.cast<double>());
+    high = high.cwiseMax(point.xyz.cast<double>());
+  }
+  FusionOptions options;
+  options.bounding_box = BoundingBox{low, Eigen::Vector3d((low.x() + high.x()) / 2, high.y(), high.z())};
+  const std::vector<FusedPoint> boxed = FusePoints(s.views, options);
+  ASSERT_GT(boxed.size(), plain.size() / 5);
+  ASSERT_LT(boxed.size(), plain.size() * 4 / 5);
+  for (const FusedPoint& point : boxed) {
+    ASSERT_LE(point.xyz.x(), options.bounding_box->max.x() + 1e-5);
+    ASSERT_GE(PlaneOf(s.scene, point.xyz.cast<double>(), 1e-4), 0);
+  }
+}
+
+TEST(FusionOptionsTest, CheckNamesTheBadField) {
+  const std::vector<FusionView> views = IdenticalViews(3);
+  auto expect_refused = [&](const FusionOptions& options, const std::string& field) {
+    try {
+      FusePoints(views, options);
+      ADD_FAILURE() << field << " accepted";
+    } catch (const std::invalid_argument& error) {
+      EXPECT_NE(std::string(error.what()).find(field), std::string::npos) << error.what();
+    }
+  };
+  FusionOptions options;
+  options.max_normal_error = 181;
+  expect_refused(options, "max_normal_error");
+  options = FusionOptions();
+  options.max_num_pixels = 2;  // below min_consistent_views (2) + 1
+  expect_refused(options, "max_num_pixels");
+  options = FusionOptions();
+  options.max_traversal_depth = 0;
+  expect_refused(options, "max_traversal_depth");
+  options = FusionOptions();
+  options.check_num_images = 0;
+  expect_refused(options, "check_num_images");
+  options = FusionOptions();
+  options.bounding_box = BoundingBox{Eigen::Vector3d(0, 0, 1), Eigen::Vector3d(1, 1, 0)};
+  expect_refused(options, "bounding_box");
+}
+
 }  // namespace
 }  // namespace dispmvs::fusion

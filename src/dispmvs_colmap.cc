@@ -26,10 +26,12 @@
 #include "colmap_io/atomic_file.h"
 #include "colmap_io/error.h"
 #include "colmap_io/workspace.h"
-#include "fusion/geometric_filter.h"
+#include "fusion/bounding_box.h"
+#include "fusion/point_fusion.h"
 #include "dense/colmap_export.h"
 #include "dense/fusion_pass.h"
 #include "dense/geometric_pass.h"
+#include "dense/image_masks.h"
 #include "dense/photometric_pass.h"
 #include "dense/plan.h"
 #include "dense/depth_estimator.h"
@@ -115,6 +117,11 @@ struct Options {
   dense::PlanOptions plan;
   dense::PhotometricOptions photometric;
   fusion::GeometricFilterOptions filter;
+  // COLMAP's StereoFusion options beyond the consistency rule (the rule is
+  // `filter`, copied in by FusionOptions()).
+  fusion::FusionOptions fusion;
+  std::string mask_path;  // empty: no masks
+  std::string bbox_path;  // empty: no box
   std::string output_path;  // default WS/fused.ply
   std::string export_path;
   std::string image_list_path;
@@ -128,6 +135,12 @@ struct Options {
   std::string command_line;  // shown in the report
 
   void Check() const;
+  // What fusion is asked: `fusion` with the consistency rule `filter`.
+  fusion::FusionOptions FusionRequest() const {
+    fusion::FusionOptions request = fusion;
+    request.consistency = filter;
+    return request;
+  }
 };
 
 // "K/N" with 0 <= K < N.
@@ -165,6 +178,19 @@ void Options::Check() const {
     throw std::invalid_argument("--min_confidence must be in [0, 1]");
   }
   filter.Check();
+  if (!(fusion.max_normal_error >= 0 && fusion.max_normal_error <= 180)) {
+    throw std::invalid_argument("--max_normal_error must be in [0, 180] degrees");
+  }
+  if (fusion.max_num_pixels < 1) throw std::invalid_argument("--max_num_pixels must be at least 1");
+  if (fusion.max_num_pixels < filter.min_consistent_views + 1) {
+    throw std::invalid_argument("--max_num_pixels (" + std::to_string(fusion.max_num_pixels) +
+                                ") must be at least --min_num_consistent + 1 (" +
+                                std::to_string(filter.min_consistent_views + 1) +
+                                "): a point holds the reference pixel and the pixels it must agree with");
+  }
+  if (fusion.max_traversal_depth < 1) throw std::invalid_argument("--max_traversal_depth must be at least 1");
+  if (fusion.check_num_images < 1) throw std::invalid_argument("--check_num_images must be at least 1");
+  FusionRequest().Check();
   if (fusion_cache_mb < 1) throw std::invalid_argument("--fusion_cache_mb must be at least 1");
   if (mode == "export" && export_path.empty()) {
     throw std::invalid_argument("--mode export needs --export_path");
@@ -175,6 +201,20 @@ void Options::Check() const {
         "--shard and --image_list split the photometric pass: use them with --mode photometric, "
         "then run --mode fuse once every part is done");
   }
+}
+
+// Takes COLMAP's spelling `colmap` of our option `ours` into `target` when it
+// was given; both given with different values is an error.
+template <typename T>
+void TakeColmapSpelling(const po::variables_map& values, const std::string& ours,
+                        const std::string& colmap, T* target) {
+  if (values.count(colmap) == 0) return;
+  const T theirs = values[colmap].as<T>();
+  if (values.count(ours) > 0 && !values[ours].defaulted() && values[ours].as<T>() != theirs) {
+    throw std::invalid_argument("--" + ours + " and --" + colmap +
+                                " are the same option with different values: give one");
+  }
+  *target = theirs;
 }
 
 std::optional<Options> ParseCommandLine(int argc, char** argv) {
@@ -272,6 +312,30 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "no reference can meet stops the run before any work.")
       ("min_confidence", po::value<double>(&o.filter.min_confidence)->default_value(0),
        "Drop pixels whose network confidence (in [0, 1]) is lower.")
+      ("mask_path", po::value<std::string>(&o.mask_path),
+       "Folder of masks, COLMAP's: MASK/NAME.png for image NAME (or MASK/NAME when NAME ends "
+       "in .png), resampled to the maps' size; black pixels (red channel 0) are ignored by the "
+       "geometric pass and fusion: no point comes from them and they agree with nothing. An "
+       "image without a mask file is used whole.")
+      ("bbox_path", po::value<std::string>(&o.bbox_path),
+       "Bounding-box file, COLMAP's: six numbers, min x y z then max x y z (world "
+       "coordinates); pixels whose 3-D point lies outside are not fused.")
+      ("max_normal_error", po::value<double>(&o.fusion.max_normal_error)->default_value(180),
+       "Fusion: degrees between the normals of a reference pixel and an agreeing source pixel "
+       "beyond which the source is not fused with it (COLMAP's test); 180 = no test. Off by "
+       "default: our normals come from the depth maps' differences, and COLMAP's 10 kept 12 % "
+       "of the example's points (F-score 82 -> 63 %) at the same precision "
+       "(docs/colmap-options.md).")
+      ("max_num_pixels", po::value<int>(&o.fusion.max_num_pixels)->default_value(10000),
+       "Fusion: most pixels averaged into one point (the reference's, then its agreeing "
+       "sources in order); the others stay free for later points.")
+      ("max_traversal_depth", po::value<int>(&o.fusion.max_traversal_depth)->default_value(100),
+       "Fusion, COLMAP's traversal depth: 1 = each point is its reference pixel alone "
+       "(agreement still required); 2 or more = the reference pixel and its agreeing sources' "
+       "pixels, which is as far as this fusion goes.")
+      ("check_num_images", po::value<int>(&o.fusion.check_num_images)->default_value(50),
+       "Fusion: each reference is checked against at most its first N sources (the most "
+       "overlapping first).")
       ("fusion_cache_mb", po::value<int>(&o.fusion_cache_mb)->default_value(o.fusion_cache_mb),
        "Fusion reads each image's maps when it needs them and keeps at most this many MB "
        "of them (more only if one reference and its sources need it), so memory does not "
@@ -286,9 +350,76 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Target workspace of --mode export.");
   // clang-format on
 
+  // COLMAP's spellings of the same settings, so that a `colmap
+  // patch_match_stereo` / `stereo_fusion` command line carries over.
+  po::options_description colmap_spellings(
+      "COLMAP's spellings, accepted for the options above (giving both spellings with "
+      "different values is an error)");
+  // clang-format off
+  colmap_spellings.add_options()
+      ("StereoFusion.mask_path", po::value<std::string>(), "= --mask_path")
+      ("StereoFusion.max_reproj_error", po::value<double>(), "= --max_reproj_error")
+      ("StereoFusion.max_depth_error", po::value<double>(), "= --max_depth_error")
+      ("StereoFusion.max_normal_error", po::value<double>(), "= --max_normal_error")
+      ("StereoFusion.min_num_pixels", po::value<int>(),
+       "N = --min_num_consistent N-1 (a point's pixels: the reference's and N-1 agreeing)")
+      ("StereoFusion.max_num_pixels", po::value<int>(), "= --max_num_pixels")
+      ("StereoFusion.max_traversal_depth", po::value<int>(), "= --max_traversal_depth")
+      ("StereoFusion.check_num_images", po::value<int>(), "= --check_num_images")
+      ("StereoFusion.max_image_size", po::value<int>(),
+       "= --max_image_size (the maps are computed at that size, so fusion runs at it)")
+      ("PatchMatchStereo.max_image_size", po::value<int>(), "= --max_image_size")
+      ("workspace_format", po::value<std::string>(), "COLMAP only (PMVS workspaces are not read)");
+  // clang-format on
+  description.add(colmap_spellings);
+
   po::variables_map values;
   if (!cli::ParseCommandLine(argc, argv, description, &values)) return std::nullopt;
+  TakeColmapSpelling(values, "mask_path", "StereoFusion.mask_path", &o.mask_path);
+  TakeColmapSpelling(values, "max_reproj_error", "StereoFusion.max_reproj_error",
+                     &o.filter.max_reprojection_error);
+  TakeColmapSpelling(values, "max_depth_error", "StereoFusion.max_depth_error",
+                     &o.filter.max_relative_depth_error);
+  TakeColmapSpelling(values, "max_normal_error", "StereoFusion.max_normal_error",
+                     &o.fusion.max_normal_error);
+  TakeColmapSpelling(values, "max_num_pixels", "StereoFusion.max_num_pixels", &o.fusion.max_num_pixels);
+  TakeColmapSpelling(values, "max_traversal_depth", "StereoFusion.max_traversal_depth",
+                     &o.fusion.max_traversal_depth);
+  TakeColmapSpelling(values, "check_num_images", "StereoFusion.check_num_images",
+                     &o.fusion.check_num_images);
+  TakeColmapSpelling(values, "max_image_size", "StereoFusion.max_image_size",
+                     &o.photometric.max_image_size);
+  TakeColmapSpelling(values, "max_image_size", "PatchMatchStereo.max_image_size",
+                     &o.photometric.max_image_size);
+  if (values.count("StereoFusion.max_image_size") && values.count("PatchMatchStereo.max_image_size") &&
+      values["StereoFusion.max_image_size"].as<int>() != values["PatchMatchStereo.max_image_size"].as<int>()) {
+    throw std::invalid_argument(
+        "--StereoFusion.max_image_size and --PatchMatchStereo.max_image_size differ: dispmvs fuses "
+        "its maps at the size it computes them, give one size");
+  }
+  // Read now, so that a bad file stops the run before the network runs.
+  if (!o.bbox_path.empty()) o.fusion.bounding_box = fusion::ReadBoundingBox(o.bbox_path);
   o.min_num_consistent_given = !values["min_num_consistent"].defaulted();
+  if (values.count("StereoFusion.min_num_pixels")) {
+    const int pixels = values["StereoFusion.min_num_pixels"].as<int>();
+    if (pixels < 1) throw std::invalid_argument("--StereoFusion.min_num_pixels must be at least 1");
+    if (o.min_num_consistent_given && o.filter.min_consistent_views != pixels - 1) {
+      throw std::invalid_argument("--StereoFusion.min_num_pixels " + std::to_string(pixels) +
+                                  " means --min_num_consistent " + std::to_string(pixels - 1) +
+                                  ", but --min_num_consistent " +
+                                  std::to_string(o.filter.min_consistent_views) + " was given too");
+    }
+    o.filter.min_consistent_views = pixels - 1;
+    o.min_num_consistent_given = true;
+  }
+  if (values.count("workspace_format")) {
+    std::string format = values["workspace_format"].as<std::string>();
+    std::transform(format.begin(), format.end(), format.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (format != "colmap") {
+      throw std::invalid_argument("--workspace_format: only COLMAP workspaces are read, got '" +
+                                  values["workspace_format"].as<std::string>() + "'");
+    }
+  }
   for (int i = 0; i < argc; ++i) o.command_line += (i > 0 ? " " : "") + std::string(argv[i]);
   if (values.count("workspace_path") == 0) {
     throw std::invalid_argument("--workspace_path is required (see --help)");
@@ -341,6 +472,14 @@ void PrintEmptyCloudWarning(const Options& options, const dense::DensePlan& plan
   if (fusion.num_images == 0) {
     std::cout << "no image has a photometric depth map to fuse (see the photometric lines above)\n";
     return;
+  }
+  if (fusion.pixels > 0 && fusion.masked_pixels == fusion.pixels) {
+    std::cout << "the masks in " << options.mask_path << " (--mask_path) ignore every pixel of the "
+              << fusion.num_images << " image(s) with depth maps (black masks: nothing is fused)\n";
+    return;
+  }
+  if (options.fusion.bounding_box) {
+    std::cout << "(the bounding box of " << options.bbox_path << " leaves out every pixel outside it) ";
   }
   std::cout << "no pixel of the " << fusion.num_images
             << " image(s) with depth maps agreed with enough of its sources (--min_num_consistent "
@@ -409,6 +548,22 @@ int Run(const Options& options) {
     dense::FusionImageOrder(workspace, plan);
     colmap_io::AtomicFileWriter probe(ply);  // a temporary file, removed at once
   }
+  // Masks: a missing folder stops the run now; images without a mask file
+  // are used whole (COLMAP's rule), which is said, since a misnamed folder
+  // or file set is the likely cause.
+  dense::ImageMasks masks;
+  if (runs_fusion && !options.mask_path.empty()) {
+    masks = dense::ImageMasks(options.mask_path);
+    std::vector<std::string> names;
+    for (const auto& [image_id, image] : plan.model.images) names.push_back(image.name);
+    const std::size_t with_mask = masks.CountWithMask(names);
+    std::cout << "masks: " << with_mask << " of " << names.size() << " image(s) have a mask in "
+              << options.mask_path << '\n';
+    if (with_mask < names.size()) {
+      std::cout << "warning: " << names.size() - with_mask << " image(s) have no mask file (NAME.png) in "
+                << options.mask_path << " and are used whole\n";
+    }
+  }
   bool failed = !plan.missing_images.empty() && options.mode != "fuse";
   std::vector<std::pair<const char*, dense::PassSummary>> summaries;
   if (options.mode == "full" || options.mode == "photometric") {
@@ -428,9 +583,9 @@ int Run(const Options& options) {
   }
   if (fusion_claim) {
     summaries.emplace_back("geometric",
-                           dense::RunGeometricPass(workspace, plan, options.filter, std::cout));
-    fusion_summary = dense::RunFusion(workspace, plan, options.filter, ply, std::cout,
-                                      static_cast<std::size_t>(options.fusion_cache_mb) << 20);
+                           dense::RunGeometricPass(workspace, plan, options.filter, std::cout, masks));
+    fusion_summary = dense::RunFusion(workspace, plan, options.FusionRequest(), ply, std::cout,
+                                      static_cast<std::size_t>(options.fusion_cache_mb) << 20, masks);
   }
   for (const auto& [pass, summary] : summaries) {
     PrintPassSummary(pass, summary, std::cout);
