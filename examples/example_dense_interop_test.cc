@@ -334,5 +334,32 @@ TEST_F(ExampleDenseInteropTest, WhiteMasksChangeNothingBlackMasksFuseNothingWith
   }
 }
 
+// A COLMAP command line's options carry over: in COLMAP's spelling they give
+// the same cloud, byte for byte, as in ours, and not the default cloud.
+TEST_F(ExampleDenseInteropTest, ColmapSpellingsMeanTheSameAsOurs) {
+  const std::vector<std::pair<std::string, std::string>> runs = {
+      {"colmap", " --StereoFusion.min_num_pixels 3 --StereoFusion.max_depth_error 0.005"
+                 " --StereoFusion.max_reproj_error 0.75 --StereoFusion.max_num_pixels 3"
+                 " --StereoFusion.check_num_images 3 --StereoFusion.max_normal_error 30"
+                 " --StereoFusion.max_traversal_depth 2 --workspace_format COLMAP"},
+      {"ours", " --min_num_consistent 2 --max_depth_error 0.005 --max_reproj_error 0.75"
+               " --max_num_pixels 3 --check_num_images 3 --max_normal_error 30"
+               " --max_traversal_depth 2"}};
+  for (const auto& [name, options] : runs) {
+    const fs::path log = dir_.path() / (name + ".log");
+    ASSERT_EQ(RunShell(std::string("'") + DISPMVS_COLMAP_PROGRAM + "' --mode fuse --no_report --workspace_path '" +
+                           root_.string() + "' --output_path '" + (dir_.path() / (name + ".ply")).string() +
+                           "'" + options,
+                       log),
+              0)
+        << testing::ReadFileBytes(log);
+  }
+  const std::string colmap = testing::ReadFileBytes(dir_.path() / "colmap.ply");
+  EXPECT_EQ(colmap, testing::ReadFileBytes(dir_.path() / "ours.ply"));
+  EXPECT_EQ(testing::ReadFileBytes(dir_.path() / "colmap.ply.vis"),
+            testing::ReadFileBytes(dir_.path() / "ours.ply.vis"));
+  EXPECT_NE(colmap, testing::ReadFileBytes(root_ / "fused.ply"));
+}
+
 }  // namespace
 }  // namespace dispmvs::examples

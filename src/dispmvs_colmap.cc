@@ -369,6 +369,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("StereoFusion.max_image_size", po::value<int>(),
        "= --max_image_size (the maps are computed at that size, so fusion runs at it)")
       ("PatchMatchStereo.max_image_size", po::value<int>(), "= --max_image_size")
+      ("PatchMatchStereo.depth_min", po::value<double>(), "= --depth_min")
+      ("PatchMatchStereo.depth_max", po::value<double>(), "= --depth_max")
+      ("PatchMatchStereo.min_triangulation_angle", po::value<double>(), "= --min_triangulation_angle")
+      ("PatchMatchStereo.filter_min_num_consistent", po::value<int>(), "= --min_num_consistent")
       ("workspace_format", po::value<std::string>(), "COLMAP only (PMVS workspaces are not read)");
   // clang-format on
   description.add(colmap_spellings);
@@ -391,6 +395,12 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
                      &o.photometric.max_image_size);
   TakeColmapSpelling(values, "max_image_size", "PatchMatchStereo.max_image_size",
                      &o.photometric.max_image_size);
+  TakeColmapSpelling(values, "depth_min", "PatchMatchStereo.depth_min", &o.plan.depth_min);
+  TakeColmapSpelling(values, "depth_max", "PatchMatchStereo.depth_max", &o.plan.depth_max);
+  TakeColmapSpelling(values, "min_triangulation_angle", "PatchMatchStereo.min_triangulation_angle",
+                     &o.plan.min_triangulation_angle);
+  TakeColmapSpelling(values, "min_num_consistent", "PatchMatchStereo.filter_min_num_consistent",
+                     &o.filter.min_consistent_views);
   if (values.count("StereoFusion.max_image_size") && values.count("PatchMatchStereo.max_image_size") &&
       values["StereoFusion.max_image_size"].as<int>() != values["PatchMatchStereo.max_image_size"].as<int>()) {
     throw std::invalid_argument(
@@ -399,7 +409,8 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   }
   // Read now, so that a bad file stops the run before the network runs.
   if (!o.bbox_path.empty()) o.fusion.bounding_box = fusion::ReadBoundingBox(o.bbox_path);
-  o.min_num_consistent_given = !values["min_num_consistent"].defaulted();
+  o.min_num_consistent_given = !values["min_num_consistent"].defaulted() ||
+                               values.count("PatchMatchStereo.filter_min_num_consistent") > 0;
   if (values.count("StereoFusion.min_num_pixels")) {
     const int pixels = values["StereoFusion.min_num_pixels"].as<int>();
     if (pixels < 1) throw std::invalid_argument("--StereoFusion.min_num_pixels must be at least 1");
