@@ -16,6 +16,8 @@ packages=(
   libgtest-dev libgmock-dev
   libbenchmark-dev        # microbenchmarks in bench/
   colmap                  # the real peer in the interop tests
+  dpkg-dev file           # `cpack -G DEB`: dpkg-shlibdeps computes the package's Depends, CPack
+                          # finds the binaries with file (cmake/packaging.cmake, tests/package/)
   unzip                   # bench/motorcycle_check.sh: the disparity inside scikit-image's .npz
   chromium                # the report_in_browser test: a real browser loads the run report
   munge slurmctld slurmd slurm-client  # the slurm_one_node test starts a one-node Slurm cluster
