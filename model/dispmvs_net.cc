@@ -233,6 +233,9 @@ struct StageResult {
   torch::Tensor state;       // [B,1,h,w] inverse depth carried to the next stage
   torch::Tensor agreement;   // [B,1,h,w] confidence of the last iteration
   std::optional<StageMatching> matching;
+  // With keep_matching, in a local (window) stage: every iteration's matched
+  // source pixels [B*N,2,h,w], for the flow loss.
+  std::vector<torch::Tensor> source_xy;
 };
 
 // What stays fixed over a stage's iterations: the epipolar geometry of every
@@ -341,6 +344,7 @@ CorrelationSamples LookUpCost(const StageSetup& setup, const torch::Tensor& base
 // Every source's match moved by the GRU's step, triangulated, and fused over
 // the sources.
 struct Triangulation {
+  torch::Tensor src_xy;     // [B*N,2,h,w] the matched source pixels (stage pixels)
   InverseDepth per_source;  // [B*N,1,h,w]
   FusedInverseDepth fused;  // [B,1,h,w]
 };
@@ -353,6 +357,7 @@ Triangulation TriangulateAndFuse(const StageInput& in, const StageSetup& setup,
   const torch::Tensor src_xy =
       EflowToSourcePixel(base_xy, setup.direction.dir, eflow + update.delta_eflow);
   Triangulation out;
+  out.src_xy = src_xy;
   out.per_source = TriangulateInverseDepth(setup.pair, src_xy);
   const torch::Tensor pair_valid = out.per_source.valid & setup.direction.valid;
   out.fused = FuseInverseDepths(out.per_source.inv_depth.view({b, n, h, w}),
@@ -460,6 +465,7 @@ StageResult RunStage(const StageInput& in, UpdateBlock& block, StageTimer* timer
     hidden = update.hidden;
     const Triangulation triangulation = TriangulateAndFuse(in, setup, base_xy, eflow, update, timer);
     const FusedInverseDepth& fused = triangulation.fused;
+    if (in.keep_matching && !setup.volume) result.source_xy.push_back(triangulation.src_xy);
 
     StageResult::Iteration it;
     it.inv_depth.valid = fused.valid;
@@ -548,6 +554,7 @@ DispMvsOutput FullResolutionOutputs(const StageResult& coarse, const StageResult
   DispMvsOutput out;
   if (coarse.matching) out.matching.push_back(*coarse.matching);
   if (fine.matching) out.matching.push_back(*fine.matching);
+  out.fine_source_xy = fine.source_xy;
   if (every_iteration) {
     // Coarse maps are two upsamplings away from full resolution: convex to
     // 1/4, then bilinear (on model v2's strided cells, or block centres).

@@ -84,6 +84,10 @@ struct DispMvsOutput {
   // and the fine stage (its first lookup window, level 0) matched, for the
   // matching loss (matching_loss.h). Empty otherwise.
   std::vector<StageMatching> matching;
+  // Model v2 in training mode: the source pixel every fine iteration matched
+  // in every source, [B*N,2,h,w] in fine-stage pixels (index b*N + i), for
+  // the flow loss (matching_loss.h, SourceFlowLoss). Empty otherwise.
+  std::vector<torch::Tensor> fine_source_xy;
 };
 
 // Motion from the reference (view 0) to every source view, from world-to-camera

@@ -244,6 +244,11 @@ TEST(DispMvsNetV2Test, TrainingReturnsBothStagesMatchingAndTheLossReachesEveryPa
   EXPECT_EQ(out.matching[0].logits.size(2), h / 16);
   EXPECT_EQ(out.matching[1].logits.size(1), FastV2Config().fine_samples);
   EXPECT_EQ(out.matching[1].logits.size(2), h / 4);
+  // Every fine iteration's matches, per source, on the fine grid.
+  ASSERT_EQ(static_cast<int64_t>(out.fine_source_xy.size()), FastV2Config().fine_iterations);
+  for (const torch::Tensor& xy : out.fine_source_xy) {
+    EXPECT_EQ(xy.sizes(), torch::IntArrayRef({sources, 2, h / 4, w / 4}));
+  }
 
   // Ground truth: a fronto-parallel plane at depth 3.5 in every view is not
   // consistent, so give depth only to the reference (no occlusion check).
@@ -260,6 +265,10 @@ TEST(DispMvsNetV2Test, TrainingReturnsBothStagesMatchingAndTheLossReachesEveryPa
     loss = loss + r.loss;
   }
   EXPECT_GT(counted, 0);
+  const auto fine_truth = ComputeGroundTruthMatches(depths, in.intrinsics, in.extrinsics, 4, h / 4, w / 4);
+  const SourceFlowLossResult flow = SourceFlowLoss(out.fine_source_xy, fine_truth);
+  EXPECT_GT(flow.count, 0);
+  loss = loss + flow.loss;
   loss.backward();
   for (const auto& p : net->named_parameters()) {
     ASSERT_TRUE(p.value().grad().defined()) << p.key();

@@ -141,4 +141,39 @@ MatchingLossResult MatchingLoss(const StageMatching& m, const GroundTruthMatches
   return result;
 }
 
+SourceFlowLossResult SourceFlowLoss(const std::vector<torch::Tensor>& matched_xy,
+                                    const GroundTruthMatches& truth, double gamma) {
+  Require(!matched_xy.empty(), "SourceFlowLoss: no iteration");
+  Require(gamma > 0.0 && gamma <= 1.0, "SourceFlowLoss: gamma must be in (0, 1]");
+  Require(truth.xy.defined() && truth.xy.dim() == 4 && truth.xy.size(1) == 2 && truth.valid.defined(),
+          "SourceFlowLoss: ground truth must be [B',2,h,w] with its mask");
+  for (const torch::Tensor& xy : matched_xy) {
+    Require(xy.defined() && xy.sizes() == truth.xy.sizes(),
+            "SourceFlowLoss: every iteration's matches must be on the ground truth's grid, got " +
+                (xy.defined() ? c10::str(xy.sizes()) : std::string("undefined")) + " for " +
+                c10::str(truth.xy.sizes()));
+  }
+  // Non-finite matches (no valid line) are left out, as invalid truth is.
+  const torch::Tensor truth_xy = torch::where(truth.valid, truth.xy, torch::zeros_like(truth.xy));
+  torch::Tensor counted = truth.valid;
+  for (const torch::Tensor& xy : matched_xy) counted = counted & torch::isfinite(xy).all(1, true);
+  const torch::Tensor counted_f = counted.to(truth_xy.scalar_type());
+  const torch::Tensor count = counted_f.sum();
+  const int64_t n = static_cast<int64_t>(matched_xy.size());
+  SourceFlowLossResult result;
+  result.loss = torch::zeros({}, truth_xy.options());
+  torch::Tensor last_error;
+  for (int64_t i = 0; i < n; ++i) {
+    const torch::Tensor xy = torch::where(counted, matched_xy[static_cast<size_t>(i)], truth_xy);
+    // sqrt(d^2 + eps): a distance with a finite gradient at 0.
+    const torch::Tensor error = ((xy - truth_xy).pow(2).sum(1, true) + 1e-8).sqrt();
+    const torch::Tensor term = (error.clamp_max(kFlowLossCap) * counted_f).sum() / count.clamp_min(1.0);
+    result.loss = result.loss + std::pow(gamma, static_cast<double>(n - 1 - i)) * term;
+    if (i + 1 == n) last_error = error.detach();
+  }
+  result.count = count.item<double>();
+  result.last_within_quarter = (counted & (last_error <= 0.25)).sum().item<double>();
+  return result;
+}
+
 }  // namespace dispmvs::model

@@ -67,4 +67,25 @@ struct MatchingLossResult {
 // on mismatched shapes.
 MatchingLossResult MatchingLoss(const StageMatching& matching, const GroundTruthMatches& truth);
 
+// Supervision of the matches themselves at every iteration of a stage, as
+// RAFT supervises its flow: the distance in stage pixels between each
+// (pixel, source) pair's matched source pixel and the true one, averaged
+// over the pairs `truth` counts, summed over iterations with RAFT's weights
+// (gamma^(n-1-i), the last 1). Where the fused depth loss reaches a source's
+// match only through the fusion (which can weigh a bad source down), this
+// asks every source to be right, to a fraction of a pixel. A pair's term is
+// capped at kFlowLossCap stage pixels (no gradient beyond): a match that far
+// off is the coarse stage's error, not a refinement the stage can make.
+constexpr double kFlowLossCap = 8.0;
+struct SourceFlowLossResult {
+  torch::Tensor loss;       // scalar; 0 without a counted pair
+  double count = 0;         // counted pairs
+  double last_within_quarter = 0;  // of them, last iteration within 1/4 stage pixel (monitoring)
+};
+// matched_xy: one [B*N,2,h,w] per iteration, on truth's grid. Throws
+// std::invalid_argument on an empty list, mismatched shapes or gamma outside
+// (0, 1].
+SourceFlowLossResult SourceFlowLoss(const std::vector<torch::Tensor>& matched_xy,
+                                    const GroundTruthMatches& truth, double gamma = 0.9);
+
 }  // namespace dispmvs::model

@@ -418,6 +418,41 @@ TEST(MatchingLoss, CrossEntropyOfAPeakedDistributionAtTheTruth) {
   EXPECT_EQ(MatchingLoss(m, truth).loss.item<double>(), 0.0);
 }
 
+TEST(SourceFlowLoss, DistancesToTheTruthWithRaftsWeightsAndACap) {
+  // Two pairs on a 1x2 grid, truth at (3, 4) and (10, 10); the second pair
+  // is not counted. Iteration 0 is 5 px off on the first pair, iteration 1
+  // 0.2 px off; gamma 0.5.
+  const auto opts = torch::TensorOptions().dtype(torch::kFloat64);
+  GroundTruthMatches truth;
+  truth.xy = torch::tensor({3.0, 10.0, 4.0, 10.0}, opts).view({1, 2, 1, 2});
+  truth.valid = torch::tensor({true, false}).view({1, 1, 1, 2});
+  const torch::Tensor first = torch::tensor({0.0, 99.0, 0.0, 99.0}, opts).view({1, 2, 1, 2});
+  torch::Tensor second = torch::tensor({3.2, 99.0, 4.0, 99.0}, opts).view({1, 2, 1, 2});
+  second.requires_grad_(true);
+  const SourceFlowLossResult r = SourceFlowLoss({first, second}, truth, 0.5);
+  EXPECT_NEAR(r.loss.item<double>(), 0.5 * 5.0 + 0.2, 1e-6);
+  EXPECT_EQ(r.count, 1);
+  EXPECT_EQ(r.last_within_quarter, 1);
+  r.loss.backward();
+  // d|xy - t| / dxy = the unit vector from the truth; nothing for the
+  // uncounted pair.
+  EXPECT_NEAR(second.grad()[0][0][0][0].item<double>(), 1.0, 1e-6);
+  EXPECT_NEAR(second.grad()[0][1][0][0].item<double>(), 0.0, 1e-6);
+  EXPECT_EQ(second.grad()[0][0][0][1].item<double>(), 0.0);
+  // A match farther than the cap adds the cap, without gradient.
+  torch::Tensor far = torch::tensor({3.0 + 2 * kFlowLossCap, 0.0, 4.0, 0.0}, opts).view({1, 2, 1, 2});
+  far.requires_grad_(true);
+  const SourceFlowLossResult capped = SourceFlowLoss({far}, truth);
+  EXPECT_NEAR(capped.loss.item<double>(), kFlowLossCap, 1e-9);
+  EXPECT_EQ(capped.last_within_quarter, 0);
+  capped.loss.backward();
+  EXPECT_EQ(far.grad().abs().sum().item<double>(), 0.0);
+  // Bad input.
+  EXPECT_THROW(SourceFlowLoss({}, truth), std::invalid_argument);
+  EXPECT_THROW(SourceFlowLoss({torch::zeros({1, 2, 2, 2}, opts)}, truth), std::invalid_argument);
+  EXPECT_THROW(SourceFlowLoss({first}, truth, 0.0), std::invalid_argument);
+}
+
 TEST(MatchingLoss, GroundTruthMatchesAreTheProjectionsAndOcclusionIsMasked) {
   // Two views looking down +z, the source shifted by 0.2 along x; a fronto-
   // parallel plane at depth 2 in the reference. The source's own depth map

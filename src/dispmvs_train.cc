@@ -79,6 +79,9 @@ options (default):
   --depth_loss L              inverse: the paper's L1 of range-normalised inverse depth, which
                               weighs a relative error at depth d by d_min / d; log: L1 of log
                               depth, every pixel's relative error alike (inverse)
+  --flow_loss_weight W        v2: weight of the flow loss, every fine iteration's match in every
+                              source against the true one in fine-stage pixels, as RAFT supervises
+                              its flow (0 = off)
   --scene_reuse R             each generated scene serves R consecutive steps, each time with
                               another view as the reference (1)
   --difficulty_start D        curriculum: generated scenes start at difficulty D in [0, 1] (smaller
@@ -219,6 +222,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--matching_loss_weight") o.matching_loss_weight = ParseDouble(flag, value);
     else if (flag == "--matching_warmup_steps") o.matching_warmup_steps = ParseInt(flag, value);
     else if (flag == "--depth_loss") o.depth_loss = value;
+    else if (flag == "--flow_loss_weight") o.flow_loss_weight = ParseDouble(flag, value);
     else if (flag == "--scene_reuse") o.scene_reuse = ParseInt(flag, value);
     else if (flag == "--eval_coarse_iterations") o.eval_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--eval_fine_iterations") o.eval_fine_iterations = ParseInt(flag, value);

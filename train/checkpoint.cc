@@ -124,6 +124,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "matching_loss_weight") return std::to_string(0.5);
   if (key == "matching_warmup_steps") return "0";
   if (key == "depth_loss") return "inverse";
+  if (key == "flow_loss_weight") return std::to_string(0.0);
   if (key == "scene_reuse") return "1";
   if (key == "train_coarse_iterations") return "0";
   if (key == "difficulty_start") return std::to_string(1.0);
@@ -218,6 +219,7 @@ Settings RunSettings(const TrainOptions& o) {
           {"matching_loss_weight", std::to_string(o.matching_loss_weight)},
           {"matching_warmup_steps", std::to_string(o.matching_warmup_steps)},
           {"depth_loss", o.depth_loss},
+          {"flow_loss_weight", std::to_string(o.flow_loss_weight)},
           {"scene_reuse", std::to_string(o.scene_reuse)},
           {"train_coarse_iterations", std::to_string(o.train_coarse_iterations)},
           {"difficulty_start", std::to_string(o.difficulty_start)},

@@ -4,6 +4,7 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "model/geometry.h"
 #include "train/batch.h"
 #include "train/validation.h"
 
@@ -70,6 +71,62 @@ std::vector<torch::Tensor> Thirds(const torch::Tensor& value, const torch::Tenso
   return {mask & (v <= low), mask & (v > low) & (v <= high), mask & (v > high)};
 }
 
+// The ground truth's inverse depth, 0 where it has none.
+torch::Tensor TrueInverseDepth(const TrainingBatch& batch) {
+  return torch::where(batch.gt_valid, batch.gt_depth.reciprocal(), torch::zeros_like(batch.gt_depth));
+}
+
+// Every source's true match, triangulated and fused with equal weights by
+// the network's geometry, at full resolution: the depth (0 where no source
+// triangulates).
+torch::Tensor DepthFromTrueMatches(const TrainingBatch& batch) {
+  const model::DispMvsInput& input = batch.input;
+  const int64_t height = batch.gt_depth.size(2), width = batch.gt_depth.size(3);
+  const torch::Tensor true_inverse = TrueInverseDepth(batch);
+  const model::RelativePoses poses = model::ReferenceToSourcePoses(input.extrinsics);
+  const torch::Tensor K = input.intrinsics.to(true_inverse.dtype());
+  std::vector<torch::Tensor> inverse_depths, valid;
+  for (int64_t s = 0; s < poses.R.size(1); ++s) {
+    const model::EpipolarPair pair =
+        model::MakeEpipolarPair(K.select(1, 0), K.select(1, s + 1), poses.R.select(1, s).to(K.dtype()),
+                                poses.T.select(1, s).to(K.dtype()), height, width);
+    const model::SourcePixels match = model::ProjectInverseDepth(pair, true_inverse);
+    const model::InverseDepth triangulated = model::TriangulateInverseDepth(pair, match.xy);
+    inverse_depths.push_back(triangulated.inv_depth);
+    valid.push_back(triangulated.valid & match.valid & batch.gt_valid);
+  }
+  const torch::Tensor all = torch::cat(inverse_depths, 1);
+  return DepthOf(model::FuseInverseDepths(all, torch::zeros_like(all), torch::cat(valid, 1)).inv_depth);
+}
+
+// The true inverse depth at the cells of a stage of `stride` (full-resolution
+// pixel (stride*i, stride*j)), upsampled bilinearly back to full resolution
+// with the cells where they are (pixel x reads cell x / stride); cells
+// without ground truth are left out of the interpolation.
+torch::Tensor DepthFromTrueGrid(const TrainingBatch& batch, int64_t stride) {
+  using torch::indexing::None;
+  using torch::indexing::Slice;
+  const torch::Tensor true_inverse = TrueInverseDepth(batch);
+  const int64_t height = true_inverse.size(2), width = true_inverse.size(3);
+  const torch::Tensor cells =
+      true_inverse.index({Slice(), Slice(), Slice(None, None, stride), Slice(None, None, stride)});
+  const torch::Tensor known = (cells > 0).to(cells.dtype());
+  const int64_t cell_rows = cells.size(2), cell_cols = cells.size(3);
+  // align_corners: normalised -1 and 1 are the first and last cells' centres.
+  const auto normalised = [&](int64_t count, int64_t cell_count) {
+    const torch::Tensor cell = torch::arange(count, cells.options()) / static_cast<double>(stride);
+    return cell_count > 1 ? cell * (2.0 / static_cast<double>(cell_count - 1)) - 1.0 : torch::zeros_like(cell);
+  };
+  const torch::Tensor x = normalised(width, cell_cols).view({1, 1, width}).expand({1, height, width});
+  const torch::Tensor y = normalised(height, cell_rows).view({1, height, 1}).expand({1, height, width});
+  const torch::Tensor grid = torch::stack({x, y}, -1).expand({cells.size(0), height, width, 2});
+  const auto options = F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kBorder)
+                           .align_corners(true);
+  const torch::Tensor sum = F::grid_sample(cells * known, grid, options);
+  const torch::Tensor weight = F::grid_sample(known, grid, options);
+  return DepthOf(torch::where(weight > 1e-6, sum / weight.clamp_min(1e-6), torch::zeros_like(sum)));
+}
+
 BreakdownRow Finish(const std::string& label, const RowSums& sums) {
   return {label, FinalizeValidation(sums.depth), SharesOf(sums.source_pixels)};
 }
@@ -87,7 +144,7 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
   const bool was_training = net->is_training();
   net->train();
   torch::NoGradGuard no_grad;
-  std::vector<RowSums> iterations(iteration_count), texture(3), depth(3);
+  std::vector<RowSums> iterations(iteration_count), texture(3), depth(3), oracles(2);
   for (size_t i = 0; i < scenes.size(); ++i) {
     const TrainingBatch batch = MakeBatch({scenes[i]}, widening);
     // The seeds of the validation table (validation.cc), so the last
@@ -107,6 +164,8 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
       AddScores(batch, final_depth, texture_bands[b], &texture[b]);
       AddScores(batch, final_depth, depth_bands[b], &depth[b]);
     }
+    AddScores(batch, DepthFromTrueMatches(batch), torch::Tensor(), &oracles[0]);
+    AddScores(batch, DepthFromTrueGrid(batch, DispMvsNet::Impl::kFineStride), torch::Tensor(), &oracles[1]);
   }
   net->train(was_training);
 
@@ -122,6 +181,8 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
     breakdown.texture.push_back(Finish(texture_names[b], texture[b]));
     breakdown.depth.push_back(Finish(depth_names[b], depth[b]));
   }
+  breakdown.oracles.push_back(Finish("oracle matches", oracles[0]));
+  breakdown.oracles.push_back(Finish("oracle 1/4 grid", oracles[1]));
   return breakdown;
 }
 
@@ -143,6 +204,9 @@ std::string FormatBreakdown(const ErrorBreakdown& breakdown) {
   for (const BreakdownRow& row : breakdown.texture) line(row);
   out << "the output by ground-truth depth (thirds per scene):\n";
   for (const BreakdownRow& row : breakdown.depth) line(row);
+  out << "oracles: the true matches through the network's geometry (must be exact); the true depth\n"
+         "at the fine stage's cells, upsampled bilinearly (a perfect fine stage, a smooth upsampler):\n";
+  for (const BreakdownRow& row : breakdown.oracles) line(row);
   return out.str();
 }
 

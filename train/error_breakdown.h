@@ -13,6 +13,16 @@
 //    by ground-truth depth, each in thirds per scene: whether the error sits
 //    on weak texture (ambiguous matches) or on well-textured surfaces
 //    (imprecise matches), near or far.
+//  * Two oracles, scored the same way, without the network:
+//    - "oracle matches": every source's ground-truth match (the source pixel
+//      of the reference's true depth) triangulated and fused with equal
+//      weights by the network's own geometry (model/geometry.h). It must
+//      score 1 within 1 %: a check of the geometry end to end.
+//    - "oracle 1/4 grid": the true inverse depth at the fine stage's cells
+//      (full-resolution pixel (4i, 4j), where the network puts them),
+//      upsampled bilinearly: what a perfect fine stage would give through a
+//      smooth upsampler. How far it is from 1 is the resolution's share of
+//      the error; the network's learned upsampler can do better at edges.
 //
 // The scenes run as in the validation table (same seeds, same
 // initialisation), so the last iteration's numbers are that table's row of
@@ -39,6 +49,7 @@ struct ErrorBreakdown {
   std::vector<BreakdownRow> iterations;  // coarse 1..Tc, fine 1..Tf
   std::vector<BreakdownRow> texture;     // weak, medium, strong
   std::vector<BreakdownRow> depth;       // near, middle, far
+  std::vector<BreakdownRow> oracles;     // "oracle matches", "oracle 1/4 grid"
 };
 
 // `widening` as in EvaluateWeights (0: no hint). The network's iterations

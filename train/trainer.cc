@@ -124,6 +124,12 @@ void TrainOptions::Check(bool for_training) const {
   } catch (const std::invalid_argument& e) {
     fail(std::string("depth_loss: ") + e.what());
   }
+  if (!(std::isfinite(flow_loss_weight) && flow_loss_weight >= 0)) {
+    fail("flow_loss_weight must be a finite number >= 0, got " + std::to_string(flow_loss_weight));
+  }
+  if (flow_loss_weight > 0 && ModelConfig::ByName(config).NeedsDepthRange()) {
+    fail("flow_loss_weight needs a v2 config (the fine stage's matches of model v2)");
+  }
   if (matching_warmup_steps < 0) {
     fail("matching_warmup_steps must be >= 0, got " + std::to_string(matching_warmup_steps));
   }
@@ -228,6 +234,16 @@ StepLoss ComputeStepLoss(const TrainOptions& options, const model::DispMvsOutput
                                             batch.input.depth_min * widening, batch.input.depth_max / widening);
   }
   result.loss = result.depth_loss;
+  // The flow loss (model v2 only, checked with the options) joins whatever
+  // else is minimised, warm-up included.
+  torch::Tensor flow_term;
+  if (options.flow_loss_weight > 0 && !output.fine_source_xy.empty()) {
+    const auto truth = model::ComputeGroundTruthMatches(
+        batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, model::DispMvsNetImpl::kFineStride,
+        output.fine_source_xy.front().size(2), output.fine_source_xy.front().size(3));
+    flow_term = options.flow_loss_weight * model::SourceFlowLoss(output.fine_source_xy, truth).loss;
+    result.loss = result.loss + flow_term;
+  }
   if (!matching_loss) return result;
   torch::Tensor match_loss = torch::zeros({}, result.depth_loss.options());
   for (const auto& stage : output.matching) {
@@ -248,6 +264,7 @@ StepLoss ComputeStepLoss(const TrainOptions& options, const model::DispMvsOutput
   // alike and the checkpoint's single step count stays true.
   result.loss = warmup ? match_loss + 0.0 * result.depth_loss
                        : result.depth_loss + options.matching_loss_weight * match_loss;
+  if (flow_term.defined()) result.loss = result.loss + flow_term;
   return result;
 }
 

@@ -88,6 +88,10 @@ struct TrainOptions {
   // range-normalised inverse depth, or "log", L1 of log depth (the relative
   // error every pixel alike, which the < 2 % metric counts). A run setting.
   std::string depth_loss = "inverse";
+  // Model v2 only: weight of the flow loss (model/matching_loss.h,
+  // SourceFlowLoss): every fine iteration's match in every source against
+  // the true one, in fine-stage pixels. 0 = off (the paper's losses alone).
+  double flow_loss_weight = 0;
   int64_t matching_warmup_steps = 0;
   // Each generated scene serves this many consecutive steps, each time with
   // another of its views as the reference (the others its sources): the
