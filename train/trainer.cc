@@ -6,6 +6,7 @@
 #include <ctime>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <stdexcept>
 #include <thread>
 
@@ -234,37 +235,46 @@ StepLoss ComputeStepLoss(const TrainOptions& options, const model::DispMvsOutput
                                             batch.input.depth_min * widening, batch.input.depth_max / widening);
   }
   result.loss = result.depth_loss;
+  // The true matches on a stage's grid, computed once per grid: the fine
+  // window's matching loss and the flow loss share the fine one.
+  std::map<int64_t, model::GroundTruthMatches> truths;
+  const auto truth_at = [&](int64_t stride, int64_t height, int64_t width) -> const model::GroundTruthMatches& {
+    auto found = truths.find(stride);
+    if (found == truths.end()) {
+      found = truths
+                  .emplace(stride, model::ComputeGroundTruthMatches(batch.gt_depths, batch.input.intrinsics,
+                                                                    batch.input.extrinsics, stride, height, width))
+                  .first;
+    }
+    return found->second;
+  };
+  if (matching_loss) {
+    torch::Tensor match_loss = torch::zeros({}, result.depth_loss.options());
+    for (const auto& stage : output.matching) {
+      const auto stage_result =
+          model::MatchingLoss(stage, truth_at(stage.stride, stage.logits.size(2), stage.logits.size(3)));
+      match_loss = match_loss + stage_result.loss;
+      if (stage.stride == model::DispMvsNetImpl::kCoarseStride) {
+        result.top1 = stage_result.top1;
+        result.counted = stage_result.count;
+      }
+    }
+    result.match_loss = match_loss.item<double>();
+    const bool warmup = step < options.matching_warmup_steps;
+    // During the warm-up the depth loss enters with weight 0: every
+    // parameter still receives a (zero) gradient, so Adam steps them all
+    // alike and the checkpoint's single step count stays true.
+    result.loss = warmup ? match_loss + 0.0 * result.depth_loss
+                         : result.depth_loss + options.matching_loss_weight * match_loss;
+  }
   // The flow loss (model v2 only, checked with the options) joins whatever
   // else is minimised, warm-up included.
-  torch::Tensor flow_term;
   if (options.flow_loss_weight > 0 && !output.fine_source_xy.empty()) {
-    const auto truth = model::ComputeGroundTruthMatches(
-        batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, model::DispMvsNetImpl::kFineStride,
-        output.fine_source_xy.front().size(2), output.fine_source_xy.front().size(3));
-    flow_term = options.flow_loss_weight * model::SourceFlowLoss(output.fine_source_xy, truth).loss;
-    result.loss = result.loss + flow_term;
+    const torch::Tensor& first = output.fine_source_xy.front();
+    const auto flow = model::SourceFlowLoss(
+        output.fine_source_xy, truth_at(model::DispMvsNetImpl::kFineStride, first.size(2), first.size(3)));
+    result.loss = result.loss + options.flow_loss_weight * flow.loss;
   }
-  if (!matching_loss) return result;
-  torch::Tensor match_loss = torch::zeros({}, result.depth_loss.options());
-  for (const auto& stage : output.matching) {
-    const auto truth = model::ComputeGroundTruthMatches(batch.gt_depths, batch.input.intrinsics,
-                                                        batch.input.extrinsics, stage.stride,
-                                                        stage.logits.size(2), stage.logits.size(3));
-    const auto stage_result = model::MatchingLoss(stage, truth);
-    match_loss = match_loss + stage_result.loss;
-    if (stage.stride == model::DispMvsNetImpl::kCoarseStride) {
-      result.top1 = stage_result.top1;
-      result.counted = stage_result.count;
-    }
-  }
-  result.match_loss = match_loss.item<double>();
-  const bool warmup = step < options.matching_warmup_steps;
-  // During the warm-up the depth loss enters with weight 0: every
-  // parameter still receives a (zero) gradient, so Adam steps them all
-  // alike and the checkpoint's single step count stays true.
-  result.loss = warmup ? match_loss + 0.0 * result.depth_loss
-                       : result.depth_loss + options.matching_loss_weight * match_loss;
-  if (flow_term.defined()) result.loss = result.loss + flow_term;
   return result;
 }
 

@@ -58,12 +58,12 @@ diff -u "$work/install_files.txt" "$work/deb_files.txt" ||
 echo "files: $(wc -l <"$work/deb_files.txt") (as cmake --install)"
 
 # Unpacked elsewhere, the programs run and find the packaged weights.
-dpkg-deb -x "$deb" "$work/root"
-for program in "$work"/root/usr/bin/*; do
+dpkg-deb -x "$deb" "$work/unpacked"
+for program in "$work"/unpacked/usr/bin/*; do
   "$program" --help >/dev/null || fail "$program --help failed"
 done
-run_example "$make_example" "$work/root/usr/bin/dispmvs_colmap" "$work/example" \
-  "$work/root/usr/share/dispmvs/models/dispmvs_small.safetensors"
+run_example "$make_example" "$work/unpacked/usr/bin/dispmvs_colmap" "$work/example" \
+  "$work/unpacked/usr/share/dispmvs/models/dispmvs_small.safetensors"
 # Passed: the unpacked copies go (the .deb and the logs stay).
-rm -rf "$work/root" "$work/prefix" "$work/cpack/_CPack_Packages"
+rm -rf "$work/unpacked" "$work/prefix" "$work/cpack/_CPack_Packages"
 echo "package built, checked, unpacked and run: ok"
