@@ -3,7 +3,7 @@
 //
 //   dispmvs_bench [--sizes 640x512,1600x1152] [--sources 5] [--config small,paper]
 //                 [--precision fp32,bf16] [--coarse_iterations N] [--fine_iterations N] [--device cpu|cuda[:i]]
-//                 [--threads 1,2] [--warmup 1] [--reps 3]
+//                 [--threads 1,2] [--warmup 1] [--reps 3] [--refinement none|ncc]
 //
 // Random weights and images: the cost of a pass does not depend on their
 // values (the network has no data-dependent control flow). For every
@@ -22,6 +22,13 @@
 // the caching allocator's peak of allocated bytes during a pass. The timings
 // then run with the allocator as the programs set it
 // (model/host_allocator.h: freed memory kept for reuse).
+//
+// --refinement ncc adds the photometric refinement that dispmvs_colmap runs
+// after the network by default (model/photometric_refinement.h) to every
+// pass, with its default settings, on the pass's own depth; its share of the
+// time is the table's "refine" column. Its cost does not depend on the
+// values either, except through memory locality: a random network's depth
+// scatters the sampled source pixels more than a real one's.
 
 #include <algorithm>
 #include <chrono>
@@ -52,6 +59,7 @@
 #include "src/program_main.h"
 #include "model/dispmvs_net.h"
 #include "model/host_allocator.h"
+#include "model/photometric_refinement.h"
 #include "model/precision.h"
 #include "model/stage_timer.h"
 
@@ -82,6 +90,7 @@ struct Options {
   std::vector<int64_t> threads{2};
   int64_t warmup = 1;
   int64_t reps = 3;
+  bool refine = false;  // --refinement ncc
 };
 
 constexpr const char* kUsage =
@@ -99,7 +108,9 @@ constexpr const char* kUsage =
     "  --device cpu|cuda|cuda:<index> (default cpu)\n"
     "  --threads T[,T...]       intra-op CPU threads (default 2)\n"
     "  --warmup N               untimed passes first (default 1)\n"
-    "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n";
+    "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n"
+    "  --refinement none|ncc    ncc: each pass also runs the photometric refinement of\n"
+    "                           dispmvs_colmap's default, timed as the 'refine' column (none)\n";
 
 std::vector<std::string> SplitComma(const std::string& s) {
   std::vector<std::string> out;
@@ -174,6 +185,11 @@ Options ParseArgs(int argc, char** argv) {
       for (const auto& t : SplitComma(value)) o.threads.push_back(ParseInteger(flag, t, 1, 1024));
     } else if (flag == "--warmup") {
       o.warmup = ParseInteger(flag, value, 0, 1000);
+    } else if (flag == "--refinement") {
+      if (value != "none" && value != "ncc") {
+        throw std::invalid_argument("--refinement must be none or ncc, got '" + value + "'");
+      }
+      o.refine = value == "ncc";
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {
@@ -302,6 +318,7 @@ struct Measurement {
   int64_t peak_bytes = -1;
   std::vector<double> stage_share;  // per NetStage, of the timed passes' wall time
   double other_share = 0;
+  double refine_share = 0;  // the photometric refinement's (--refinement ncc)
 };
 
 // The time per view and the stage breakdown, with the allocator as users
@@ -311,11 +328,19 @@ Measurement MeasureTime(DispMvsNet& net, const DispMvsInput& input, const Option
   const auto synchronize = [&] {
     if (device.is_cuda()) torch::cuda::synchronize(device.index() < 0 ? -1 : device.index());
   };
+  double refine_seconds = 0;
   const auto pass = [&] {
     synchronize();
     const auto start = std::chrono::steady_clock::now();
-    net->forward(input);
+    const dispmvs::model::DispMvsOutput output = net->forward(input);
     synchronize();
+    if (o.refine) {
+      const auto refine_start = std::chrono::steady_clock::now();
+      dispmvs::model::RefineDepthPhotometrically(input.images, input.intrinsics, input.extrinsics,
+                                                 output.depth, output.valid, {});
+      synchronize();
+      refine_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - refine_start).count();
+    }
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   };
   for (int64_t i = 0; i < o.warmup; ++i) pass();
@@ -326,12 +351,14 @@ Measurement MeasureTime(DispMvsNet& net, const DispMvsInput& input, const Option
   StageTimer timer(device.is_cuda() ? std::function<void()>(synchronize) : nullptr);
   net->set_stage_timer(&timer);
   double timed_total = 0;
+  refine_seconds = 0;
   for (int64_t i = 0; i < o.reps; ++i) timed_total += pass();
   net->set_stage_timer(nullptr);
   for (size_t s = 0; s < kNumNetStages; ++s) {
     m.stage_share.push_back(timer.seconds(static_cast<NetStage>(s)) / timed_total);
   }
-  m.other_share = std::max(0.0, 1.0 - timer.total_seconds() / timed_total);
+  m.refine_share = refine_seconds / timed_total;
+  m.other_share = std::max(0.0, 1.0 - (timer.total_seconds() + refine_seconds) / timed_total);
   return m;
 }
 
@@ -513,9 +540,9 @@ int main(int argc, char** argv) {
       row.m.peak_bytes = peak;
     });
 
-    std::printf("DispMVS forward pass (inference) on %s, N = %lld sources, %lld warm-up, "
+    std::printf("DispMVS forward pass (inference)%s on %s, N = %lld sources, %lld warm-up, "
                 "%lld timed + %lld profiled passes; LibTorch %s\n",
-                device.str().c_str(), static_cast<long long>(o.sources),
+                o.refine ? " + photometric refinement" : "", device.str().c_str(), static_cast<long long>(o.sources),
                 static_cast<long long>(o.warmup), static_cast<long long>(o.reps),
                 static_cast<long long>(o.reps), TORCH_VERSION);
     std::printf("peak memory: %s\n\n", PeakMemoryProbe(device).method());
@@ -523,8 +550,8 @@ int main(int argc, char** argv) {
     for (size_t s = 0; s < kNumNetStages; ++s) {
       std::printf(" %s |", NetStageName(static_cast<NetStage>(s)));
     }
-    std::printf(" other |\n|---|---|---|---|---|---|---|---|---|");
-    for (size_t s = 0; s <= kNumNetStages; ++s) std::printf("---|");
+    std::printf(" refine | other |\n|---|---|---|---|---|---|---|---|---|");
+    for (size_t s = 0; s <= kNumNetStages + 1; ++s) std::printf("---|");
     std::printf("\n");
     for (const Row& r : rows) {
       std::printf("| %s | %s | %.2fM | %lld+%lld | %lldx%lld | %lld | %.3f | %.3f | ",
@@ -538,7 +565,7 @@ int main(int argc, char** argv) {
         std::printf("n/a |");
       }
       for (const double share : r.m.stage_share) std::printf(" %.1f%% |", 100.0 * share);
-      std::printf(" %.1f%% |\n", 100.0 * r.m.other_share);
+      std::printf(" %.1f%% | %.1f%% |\n", 100.0 * r.m.refine_share, 100.0 * r.m.other_share);
     }
     return 0;
   });

@@ -12,6 +12,7 @@
 #include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/host_allocator.h"
+#include "model/photometric_refinement.h"
 #include "model/safetensors.h"
 
 namespace dispmvs::dense {
@@ -72,6 +73,14 @@ void EstimatorOptions::Check() const {
     throw std::invalid_argument("--coarse_iterations and --fine_iterations must be >= 0");
   }
   if (feature_cache_mb < 0) throw std::invalid_argument("--feature_cache_mb must be >= 0");
+  if (refinement != "ncc" && refinement != "none") {
+    throw std::invalid_argument("--refinement must be ncc or none, got '" + refinement + "'");
+  }
+  try {
+    refinement_options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw std::invalid_argument(std::string("--refine_* options: ") + error.what());
+  }
 }
 
 struct DepthEstimator::Impl {
@@ -80,6 +89,8 @@ struct DepthEstimator::Impl {
   model::ModelConfig config;
   model::DispMvsNet net{nullptr};
   std::unique_ptr<FeatureCache> features;
+  bool refine = false;
+  model::PhotometricRefinementOptions refinement;
 };
 
 DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::make_unique<Impl>()) {
@@ -107,6 +118,8 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   impl_->net->to(impl_->device);
   impl_->net->eval();
   impl_->net->set_precision(impl_->precision);
+  impl_->refine = options.refinement == "ncc";
+  impl_->refinement = options.refinement_options;
 }
 
 DepthEstimator::~DepthEstimator() = default;
@@ -198,8 +211,14 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
   // start from the same random depths.
   const model::DispMvsOutput output =
       impl_->net->forward(input, at::make_generator<at::CPUGeneratorImpl>(seed));
+  torch::Tensor depth = output.depth;
+  if (impl_->refine) {
+    depth = model::RefineDepthPhotometrically(input.images, input.intrinsics, input.extrinsics,
+                                              output.depth, output.valid, impl_->refinement)
+                .depth;
+  }
   DepthEstimate estimate;
-  estimate.depth = ToDenseArray(output.depth[0][0]);
+  estimate.depth = ToDenseArray(depth[0][0]);
   estimate.confidence = ToDenseArray(output.confidence[0][0] * output.valid[0][0]);
   return estimate;
 }

@@ -15,6 +15,7 @@
 
 #include "colmap_io/dense_array.h"
 #include "colmap_io/depth_range.h"
+#include "model/photometric_refinement_options.h"
 
 namespace dispmvs::dense {
 
@@ -35,6 +36,12 @@ struct EstimatorOptions {
   // image that is the source of several references is encoded once), MiB;
   // 0 = encode every view of every problem.
   int feature_cache_mb = 256;
+  // What follows the network: "ncc", a short search along the epipolar lines
+  // around its depth scored by normalised cross-correlation of the images
+  // (model/photometric_refinement.h), or "none", the network's depth as it is
+  // (the paper's behaviour).
+  std::string refinement = "ncc";
+  model::PhotometricRefinementOptions refinement_options;
 
   // Throws std::invalid_argument naming the command-line option at fault.
   void Check() const;

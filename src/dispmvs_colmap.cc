@@ -286,6 +286,31 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Arithmetic of the network's GRU update convolutions: auto (bf16 on a CPU with "
        "native bf16 instructions, AVX-512 BF16 or AMX, else fp32), fp32 or bf16. bf16 is "
        "about a sixth faster per view with the same accuracy (docs/benchmarks.md).")
+      ("refinement", po::value<std::string>(&o.photometric.estimator.refinement)
+           ->default_value(o.photometric.estimator.refinement),
+       "After the network: ncc (a search of +-refine_steps hypotheses along each source's "
+       "epipolar line around the network's depth, scored by normalised cross-correlation "
+       "of the images; docs/dense.md) or none (the network's depth as it is).")
+      ("refine_window_radius",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.window_radius)
+           ->default_value(o.photometric.estimator.refinement_options.window_radius),
+       "--refinement ncc: the correlation window is (2r+1) x (2r+1) pixels.")
+      ("refine_steps", po::value<int64_t>(&o.photometric.estimator.refinement_options.steps)
+           ->default_value(o.photometric.estimator.refinement_options.steps),
+       "--refinement ncc: hypotheses on each side of the network's depth.")
+      ("refine_step_pixels",
+       po::value<double>(&o.photometric.estimator.refinement_options.step_pixels)
+           ->default_value(o.photometric.estimator.refinement_options.step_pixels),
+       "--refinement ncc: their spacing along the epipolar line of the source where the "
+       "match moves most, pixels.")
+      ("refine_min_ncc", po::value<double>(&o.photometric.estimator.refinement_options.min_ncc)
+           ->default_value(o.photometric.estimator.refinement_options.min_ncc),
+       "--refinement ncc: the correlation needed to replace the network's depth.")
+      ("refine_min_texture",
+       po::value<double>(&o.photometric.estimator.refinement_options.min_texture)
+           ->default_value(o.photometric.estimator.refinement_options.min_texture),
+       "--refinement ncc: the reference window's grey-value standard deviation needed "
+       "(grey values in [0, 1]).")
       ("threads", po::value<int>(&o.photometric.estimator.threads)->default_value(0),
        "CPU threads for the network; 0 = one per core.")
       ("seed", po::value<uint64_t>(&o.photometric.seed)->default_value(0),

@@ -49,6 +49,12 @@ options (default):
   --eval_coarse_iterations K  evaluation only: GRU iterations of the coarse stage, 0 = the weights' (0)
   --eval_fine_iterations K    evaluation only: the same for the fine stage (the speed knob of
                               dispmvs_colmap --fine_iterations) (0)
+  --eval_refinement R         evaluation only: what follows the network, none or ncc (dispmvs_colmap
+                              --refinement: a search along the epipolar lines around its depth,
+                              scored by normalised cross-correlation of the images) (none)
+  --eval_refine_steps K       evaluation only, with ncc: hypotheses on each side (dispmvs_colmap
+                              --refine_steps)
+  --eval_refine_min_ncc C     evaluation only, with ncc: correlation needed (--refine_min_ncc)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -227,6 +233,9 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--eval_coarse_iterations") o.eval_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--eval_fine_iterations") o.eval_fine_iterations = ParseInt(flag, value);
     else if (flag == "--precision") o.precision = value;
+    else if (flag == "--eval_refinement") o.eval_refinement = value;
+    else if (flag == "--eval_refine_steps") o.eval_refinement_options.steps = ParseInt(flag, value);
+    else if (flag == "--eval_refine_min_ncc") o.eval_refinement_options.min_ncc = ParseDouble(flag, value);
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
     else if (flag == "--difficulty_ramp_steps") o.difficulty_ramp_steps = ParseInt(flag, value);

@@ -27,6 +27,7 @@
 
 #include <torch/torch.h>
 
+#include "model/photometric_refinement_options.h"
 #include "train/source_pixel_metrics.h"
 #include "train/validation_metrics.h"
 
@@ -105,6 +106,11 @@ struct TrainOptions {
   // (dispmvs_colmap --fine_iterations); this measures what they cost.
   int64_t eval_coarse_iterations = 0;
   int64_t eval_fine_iterations = 0;
+  // Evaluation only: what follows the network, "none" or "ncc" (the
+  // photometric refinement of dispmvs_colmap --refinement ncc,
+  // model/photometric_refinement.h, with these settings).
+  std::string eval_refinement = "none";
+  model::PhotometricRefinementOptions eval_refinement_options;
   // The arithmetic of the GRU update's convolutions, "fp32", "bf16" or
   // "auto" (model/precision.h). In evaluation: what bf16 costs in accuracy.
   // In training: the forward and backward passes of those convolutions, about

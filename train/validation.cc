@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "model/matching_loss.h"
+#include "model/photometric_refinement.h"
 #include "train/batch.h"
 #include "train/source_pixel_metrics.h"
 #include "train/training_samples.h"
@@ -56,7 +57,13 @@ WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSamp
     const auto batch = MakeBatch({scenes[i]}, widening);
     // Same initialisation for a scene at every evaluation: the numbers differ
     // between evaluations only because the weights do.
-    const auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
+    auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
+    if (options.eval_refinement == "ncc") {
+      output.depth = model::RefineDepthPhotometrically(batch.input.images, batch.input.intrinsics,
+                                                       batch.input.extrinsics, output.depth,
+                                                       output.valid, options.eval_refinement_options)
+                         .depth;
+    }
     sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
     if (!look_from_sources) continue;
     torch::Tensor seen;

@@ -1,0 +1,62 @@
+#pragma once
+// Photometric refinement of a depth map: a short search along each source's
+// epipolar line around the network's depth, scored by normalised
+// cross-correlation (NCC) of image windows at full resolution.
+//
+// Why: the network's fine stage works on a 1/4 grid with a learned matching
+// cost, and its matches are often a full-resolution pixel or more off even
+// where the depth is roughly right (docs/training.md, "Oracles"): a 2-10 %
+// error across textured planes. NCC of the images themselves is exact to a
+// fraction of a pixel there, and invariant to gain and offset (exposure), but
+// it cannot find the right match on its own over a whole epipolar line in
+// weak or repeated texture. So the network gives the start and the search
+// stays within a few pixels of it: the network decides which surface, the
+// images decide exactly where.
+//
+// For every reference pixel p with network inverse depth w0 (geometry.h's
+// conventions):
+//  * the step dw is chosen so that one step moves p's match by `step_pixels`
+//    in the source where it moves most (the largest |dp_s/dw| at w0);
+//  * hypotheses w_k = w0 + k dw, k = -steps..steps (w_k > 0);
+//  * each source image is sampled (bilinearly) where every pixel q projects
+//    at its own w0(q) + k dw(q): the window around p follows the network's
+//    surface shape, not a fronto-parallel plane;
+//  * score(k) = NCC of the (2r+1)^2 windows of the reference and the sampled
+//    source (grey values), averaged over the better half of the sources,
+//    chosen per pixel once, by their NCC at the network's depth (occlusion:
+//    the worse half is left out); a chosen source whose match comes within
+//    r pixels of its border at step k scores -1 there;
+//  * the best k, refined by a parabola through its neighbours' scores.
+// The refined depth replaces the network's only where the search has a clear
+// answer: the best score is at least `min_ncc`, it lies strictly inside the
+// searched interval (a best score at the border means the truth may be
+// outside), and the reference window has texture (standard deviation of
+// grey values at least `min_texture`). Elsewhere the network's depth stays.
+//
+// Runs without autograd on any device; images [B,V,3,H,W] as in
+// DispMvsInput (view 0 the reference), intrinsics in the pixel-index
+// convention at the images' resolution.
+
+#include <torch/torch.h>
+
+#include "model/photometric_refinement_options.h"
+
+namespace dispmvs::model {
+
+struct PhotometricRefinement {
+  torch::Tensor depth;    // [B,1,H,W], 0 where invalid
+  torch::Tensor valid;    // [B,1,H,W] bool: the input's valid mask (refinement adds none)
+  torch::Tensor refined;  // [B,1,H,W] bool: where the search replaced the depth
+  torch::Tensor score;    // [B,1,H,W] the best NCC found, -1 where none was computed
+};
+
+// depth, valid: [B,1,H,W] (the network's DispMvsOutput::depth and valid).
+// Throws std::invalid_argument on mismatched shapes or V < 2.
+PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
+                                                 const torch::Tensor& intrinsics,
+                                                 const torch::Tensor& extrinsics,
+                                                 const torch::Tensor& depth,
+                                                 const torch::Tensor& valid,
+                                                 const PhotometricRefinementOptions& options);
+
+}  // namespace dispmvs::model

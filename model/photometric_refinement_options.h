@@ -1,0 +1,22 @@
+#pragma once
+// The settings of the photometric refinement (photometric_refinement.h),
+// apart from it so that code that keeps LibTorch out of its headers
+// (dense/depth_estimator.h) can hold them.
+
+#include <cstdint>
+
+namespace dispmvs::model {
+
+struct PhotometricRefinementOptions {
+  int64_t window_radius = 3;  // NCC window (2r+1) x (2r+1) pixels
+  int64_t steps = 6;          // hypotheses on each side of the network's depth
+  double step_pixels = 1.0;   // their spacing in the source with most parallax, pixels
+  double min_ncc = 0.2;       // the best score needed to replace the network's depth
+  double min_texture = 0.01;  // the reference window's grey-value std needed (images in [0, 1])
+
+  // Throws std::invalid_argument naming the field: radius in [1, 15], steps
+  // in [1, 64], step_pixels in (0, 8], min_ncc in [-1, 1], min_texture >= 0.
+  void Check() const;
+};
+
+}  // namespace dispmvs::model

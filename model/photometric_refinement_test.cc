@@ -1,0 +1,207 @@
+#include "model/photometric_refinement.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include <torch/torch.h>
+
+namespace dispmvs::model {
+namespace {
+
+using torch::indexing::Slice;
+
+constexpr int64_t kHeight = 48, kWidth = 64;
+constexpr double kFocal = 50;
+
+// A slanted textured plane Z = 4 + 0.3 X + 0.2 Y (world = reference camera)
+// seen by the reference and two sources, rendered here by intersecting each
+// pixel's ray with the plane (not through geometry.h): the refinement's
+// projections are checked against an independent computation.
+struct PlaneScene {
+  torch::Tensor images;      // [1,3,3,H,W]
+  torch::Tensor intrinsics;  // [1,3,3,3]
+  torch::Tensor extrinsics;  // [1,3,4,4]
+  torch::Tensor depth;       // [1,1,H,W] the reference's true depth
+};
+
+double Texture(double x, double y) {
+  return 0.5 + 0.15 * std::sin(5.0 * x + 1.3 * y) + 0.12 * std::sin(-2.1 * x + 6.3 * y + 0.5) +
+         0.1 * std::sin(9.1 * x + 7.7 * y + 1.0);
+}
+
+torch::Tensor RotationY(double degrees) {
+  const double a = degrees * M_PI / 180.0;
+  return torch::tensor({std::cos(a), 0.0, std::sin(a), 0.0, 1.0, 0.0, -std::sin(a), 0.0, std::cos(a)},
+                       torch::kFloat64)
+      .view({3, 3});
+}
+
+// World-to-camera [4,4] of a camera at `centre` with rotation R (X_cam = R (X - centre)).
+torch::Tensor Pose(const torch::Tensor& R, const std::vector<double>& centre) {
+  torch::Tensor pose = torch::eye(4, torch::kFloat64);
+  pose.index_put_({Slice(0, 3), Slice(0, 3)}, R);
+  pose.index_put_({Slice(0, 3), 3}, -torch::matmul(R, torch::tensor(centre, torch::kFloat64)));
+  return pose;
+}
+
+// Renders view (K, pose) by point sampling at pixel centres; also returns
+// its depth (z in the camera).
+std::pair<torch::Tensor, torch::Tensor> Render(const torch::Tensor& K, const torch::Tensor& pose,
+                                               bool flat) {
+  const auto Ka = K.accessor<double, 2>();
+  const torch::Tensor R = pose.index({Slice(0, 3), Slice(0, 3)});
+  const torch::Tensor centre = -torch::matmul(R.t(), pose.index({Slice(0, 3), 3}));
+  const auto Ra = R.accessor<double, 2>();
+  const auto Ca = centre.accessor<double, 1>();
+  torch::Tensor image = torch::zeros({3, kHeight, kWidth}, torch::kFloat32);
+  torch::Tensor depth = torch::zeros({kHeight, kWidth}, torch::kFloat32);
+  for (int64_t i = 0; i < kHeight; ++i) {
+    for (int64_t j = 0; j < kWidth; ++j) {
+      // Camera ray (z = 1), then in world coordinates: R^T d.
+      const double dc[3] = {(j - Ka[0][2]) / Ka[0][0], (i - Ka[1][2]) / Ka[1][1], 1.0};
+      double d[3];
+      for (int a = 0; a < 3; ++a) d[a] = Ra[0][a] * dc[0] + Ra[1][a] * dc[1] + Ra[2][a] * dc[2];
+      const double t = (4.0 + 0.3 * Ca[0] + 0.2 * Ca[1] - Ca[2]) / (d[2] - 0.3 * d[0] - 0.2 * d[1]);
+      const double x = Ca[0] + t * d[0], y = Ca[1] + t * d[1];
+      const double value = flat ? 0.5 : Texture(x, y);
+      for (int c = 0; c < 3; ++c) image[c][i][j] = static_cast<float>(value);
+      depth[i][j] = static_cast<float>(t);  // z in the camera: the ray's z is 1
+    }
+  }
+  return {image, depth};
+}
+
+PlaneScene MakePlaneScene(bool flat = false) {
+  const torch::Tensor K =
+      torch::tensor({kFocal, 0.0, 31.5, 0.0, kFocal, 23.5, 0.0, 0.0, 1.0}, torch::kFloat64).view({3, 3});
+  const std::vector<torch::Tensor> poses = {Pose(torch::eye(3, torch::kFloat64), {0, 0, 0}),
+                                            Pose(RotationY(-4.0), {1.0, 0.0, 0.0}),
+                                            Pose(RotationY(3.0), {-0.8, 0.3, 0.1})};
+  std::vector<torch::Tensor> images;
+  PlaneScene scene;
+  for (size_t v = 0; v < poses.size(); ++v) {
+    auto [image, depth] = Render(K, poses[v], flat);
+    images.push_back(image);
+    if (v == 0) scene.depth = depth.view({1, 1, kHeight, kWidth});
+  }
+  scene.images = torch::stack(images).unsqueeze(0);
+  scene.intrinsics = K.to(torch::kFloat32).expand({1, 3, 3, 3}).contiguous();
+  scene.extrinsics = torch::stack(poses).to(torch::kFloat32).unsqueeze(0);
+  return scene;
+}
+
+torch::Tensor RelativeError(const torch::Tensor& depth, const torch::Tensor& truth) {
+  return ((depth - truth) / truth).abs();
+}
+
+// Pixels at least `margin` from the reference's border.
+torch::Tensor Interior(int64_t margin) {
+  torch::Tensor inside = torch::zeros({1, 1, kHeight, kWidth}, torch::kBool);
+  inside.index_put_({0, 0, Slice(margin, kHeight - margin), Slice(margin, kWidth - margin)}, true);
+  return inside;
+}
+
+TEST(PhotometricRefinementTest, PullsADepthSeveralPixelsOffOntoTheTexturedPlane) {
+  const PlaneScene scene = MakePlaneScene();
+  const torch::Tensor valid = torch::ones_like(scene.depth, torch::kBool);
+  // 12 % too far: the matches are 1 to 2 pixels off in the sources.
+  const torch::Tensor start = scene.depth * 1.12;
+  const PhotometricRefinement out =
+      RefineDepthPhotometrically(scene.images, scene.intrinsics, scene.extrinsics, start, valid, {});
+  // Measured with the defaults (1-pixel steps): refined 0.947 of the
+  // interior, median error 0.35 %, 0.90 within 1 %, from 12 % everywhere.
+  // What remains is the parabola's bias between whole steps (quarter-pixel
+  // steps give a median under 0.1 % here, at four times the cost).
+  const torch::Tensor interior = Interior(6);
+  const torch::Tensor error = RelativeError(out.depth, scene.depth).masked_select(interior);
+  EXPECT_GT(out.refined.masked_select(interior).to(torch::kFloat32).mean().item<float>(), 0.9);
+  EXPECT_LT(error.median().item<float>(), 0.005);
+  EXPECT_GT((error < 0.01).to(torch::kFloat32).mean().item<float>(), 0.85);
+  EXPECT_TRUE(out.valid.all().item<bool>());
+  EXPECT_GT(out.score.masked_select(out.refined).min().item<float>(), 0.2);
+  // Where it did not refine, the depth is the input's, bit for bit.
+  EXPECT_TRUE(torch::equal(out.depth.masked_select(~out.refined), start.masked_select(~out.refined)));
+}
+
+TEST(PhotometricRefinementTest, KeepsTheTrueDepth) {
+  const PlaneScene scene = MakePlaneScene();
+  const torch::Tensor valid = torch::ones_like(scene.depth, torch::kBool);
+  const PhotometricRefinement out = RefineDepthPhotometrically(
+      scene.images, scene.intrinsics, scene.extrinsics, scene.depth, valid, {});
+  // Measured: median 0.39 %, 0.93 within 1 % (the same bias between steps).
+  const torch::Tensor error = RelativeError(out.depth, scene.depth).masked_select(Interior(6));
+  EXPECT_LT(error.median().item<float>(), 0.005);
+  EXPECT_GT((error < 0.01).to(torch::kFloat32).mean().item<float>(), 0.9);
+}
+
+TEST(PhotometricRefinementTest, LeavesTexturelessAndInvalidPixelsAlone) {
+  const PlaneScene flat = MakePlaneScene(/*flat=*/true);
+  torch::Tensor valid = torch::ones_like(flat.depth, torch::kBool);
+  valid.index_put_({0, 0, Slice(0, 10), Slice()}, false);
+  const torch::Tensor start = flat.depth * 1.1;
+  const PhotometricRefinement out =
+      RefineDepthPhotometrically(flat.images, flat.intrinsics, flat.extrinsics, start, valid, {});
+  EXPECT_FALSE(out.refined.any().item<bool>());
+  EXPECT_TRUE(torch::equal(out.valid, valid));
+  EXPECT_TRUE(torch::equal(out.depth, torch::where(valid, start, torch::zeros_like(start))));
+
+  // A textured scene: invalid pixels stay invalid, at 0.
+  const PlaneScene scene = MakePlaneScene();
+  const PhotometricRefinement textured = RefineDepthPhotometrically(
+      scene.images, scene.intrinsics, scene.extrinsics, scene.depth * 1.1, valid, {});
+  EXPECT_FALSE(textured.refined.masked_select(~valid).any().item<bool>());
+  EXPECT_EQ(textured.depth.masked_select(~valid).abs().sum().item<float>(), 0.0f);
+  EXPECT_TRUE(textured.refined.any().item<bool>());
+}
+
+TEST(PhotometricRefinementTest, OneSourceIsEnough) {
+  const PlaneScene scene = MakePlaneScene();
+  const torch::Tensor valid = torch::ones_like(scene.depth, torch::kBool);
+  const PhotometricRefinement out = RefineDepthPhotometrically(
+      scene.images.narrow(1, 0, 2), scene.intrinsics.narrow(1, 0, 2),
+      scene.extrinsics.narrow(1, 0, 2), scene.depth * 0.92, valid, {});
+  // Source 1 sits at +x: the reference's left columns are outside it.
+  const torch::Tensor seen = Interior(6) & (torch::arange(kWidth).view({1, 1, 1, kWidth}) >= 24);
+  const torch::Tensor error = RelativeError(out.depth, scene.depth).masked_select(seen);
+  EXPECT_LT(error.median().item<float>(), 0.006);  // measured 0.44 %, from 8 %
+}
+
+TEST(PhotometricRefinementTest, ChecksOptionsAndShapes) {
+  const auto rejects = [](PhotometricRefinementOptions o, const std::string& field) {
+    try {
+      o.Check();
+      ADD_FAILURE() << field << " accepted";
+    } catch (const std::invalid_argument& error) {
+      EXPECT_NE(std::string(error.what()).find(field), std::string::npos) << error.what();
+    }
+  };
+  PhotometricRefinementOptions o;
+  o.window_radius = 0;
+  rejects(o, "window_radius");
+  o = {};
+  o.steps = 0;
+  rejects(o, "steps");
+  o = {};
+  o.step_pixels = 0;
+  rejects(o, "step_pixels");
+  o = {};
+  o.min_ncc = 1.5;
+  rejects(o, "min_ncc");
+  o = {};
+  o.min_texture = -1;
+  rejects(o, "min_texture");
+  EXPECT_NO_THROW(PhotometricRefinementOptions{}.Check());
+
+  const PlaneScene scene = MakePlaneScene();
+  const torch::Tensor valid = torch::ones_like(scene.depth, torch::kBool);
+  EXPECT_THROW(RefineDepthPhotometrically(scene.images.narrow(1, 0, 1), scene.intrinsics,
+                                          scene.extrinsics, scene.depth, valid, {}),
+               std::invalid_argument);
+  EXPECT_THROW(RefineDepthPhotometrically(scene.images, scene.intrinsics, scene.extrinsics,
+                                          scene.depth.narrow(3, 0, 10), valid, {}),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace dispmvs::model
