@@ -26,9 +26,10 @@
 // --refinement ncc adds the photometric refinement that dispmvs_colmap runs
 // after the network by default (model/photometric_refinement.h) to every
 // pass, with its default settings, on the pass's own depth; its share of the
-// time is the table's "refine" column. Its cost does not depend on the
-// values either, except through memory locality: a random network's depth
-// scatters the sampled source pixels more than a real one's.
+// time is the table's "refine" column, and the peak memory includes it. Its
+// cost does not depend on the values either, except through memory
+// locality: a random network's depth scatters the sampled source pixels more
+// than a real one's.
 
 #include <algorithm>
 #include <chrono>
@@ -364,13 +365,21 @@ Measurement MeasureTime(DispMvsNet& net, const DispMvsInput& input, const Option
 
 // Peak memory of a pass: one pass to settle one-time allocations, then the
 // largest peak of two.
-int64_t MeasurePeakMemory(DispMvsNet& net, const DispMvsInput& input, const torch::Device& device) {
-  net->forward(input);
+int64_t MeasurePeakMemory(DispMvsNet& net, const DispMvsInput& input, const torch::Device& device,
+                          bool refine) {
+  const auto pass = [&] {
+    const dispmvs::model::DispMvsOutput output = net->forward(input);
+    if (refine) {
+      dispmvs::model::RefineDepthPhotometrically(input.images, input.intrinsics, input.extrinsics,
+                                                 output.depth, output.valid, {});
+    }
+  };
+  pass();
   PeakMemoryProbe memory(device);
   int64_t peak = -1;
   for (int i = 0; i < 2; ++i) {
     memory.Start();
-    net->forward(input);
+    pass();
     if (device.is_cuda()) torch::cuda::synchronize(device.index() < 0 ? -1 : device.index());
     peak = std::max(peak, memory.Stop());
   }
@@ -517,7 +526,7 @@ int main(int argc, char** argv) {
     // and would outlast any later timing; the child reports its peaks through
     // a pipe and exits before the timings start.
     const auto measure_memory = [&](DispMvsNet& net, const DispMvsInput& input, Row& row) {
-      row.m.peak_bytes = MeasurePeakMemory(net, input, device);
+      row.m.peak_bytes = MeasurePeakMemory(net, input, device, o.refine);
     };
     if (device.is_cpu()) {
       const std::vector<int64_t> peaks = MeasureCpuMemoryInChild([&] {
