@@ -5,6 +5,7 @@
 #include <stdexcept>
 
 #include "model/geometry.h"
+#include "model/photometric_refinement.h"
 #include "train/batch.h"
 #include "train/validation.h"
 
@@ -145,6 +146,7 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
   net->train();
   torch::NoGradGuard no_grad;
   std::vector<RowSums> iterations(iteration_count), texture(3), depth(3), oracles(2);
+  RowSums refined;
   for (size_t i = 0; i < scenes.size(); ++i) {
     const TrainingBatch batch = MakeBatch({scenes[i]}, widening);
     // The seeds of the validation table (validation.cc), so the last
@@ -157,7 +159,14 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
     for (size_t k = 0; k < iteration_count; ++k) {
       AddScores(batch, DepthOf(output.inv_depths[k]), torch::Tensor(), &iterations[k]);
     }
-    const torch::Tensor final_depth = DepthOf(output.inv_depths.back());
+    torch::Tensor final_depth = DepthOf(output.inv_depths.back());
+    if (options.eval_refinement == "ncc") {
+      final_depth = model::RefineDepthPhotometrically(batch.input.images, batch.input.intrinsics,
+                                                      batch.input.extrinsics, final_depth,
+                                                      final_depth > 0, options.eval_refinement_options)
+                        .depth;
+      AddScores(batch, final_depth, torch::Tensor(), &refined);
+    }
     const auto texture_bands = Thirds(LocalTexture(batch.input.images), batch.gt_valid);
     const auto depth_bands = Thirds(batch.gt_depth, batch.gt_valid);
     for (size_t b = 0; b < 3; ++b) {
@@ -175,6 +184,7 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
                                                : "fine " + std::to_string(k - coarse_count + 1);
     breakdown.iterations.push_back(Finish(label, iterations[static_cast<size_t>(k)]));
   }
+  if (options.eval_refinement == "ncc") breakdown.iterations.push_back(Finish("refined", refined));
   const char* texture_names[] = {"texture weak", "texture medium", "texture strong"};
   const char* depth_names[] = {"depth near", "depth middle", "depth far"};
   for (int b = 0; b < 3; ++b) {

@@ -9,6 +9,9 @@
 //    source_pixel_metrics.h). The last row is the output itself. Whether the
 //    fine iterations still gain, and how far from sub-pixel matches the
 //    last one is, says which stage holds the error.
+//    With --eval_refinement ncc (TrainOptions::eval_refinement) one more
+//    row, "refined": the output after the photometric refinement
+//    (model/photometric_refinement.h), which the splits below then use.
 //  * The output split by texture (the reference image's local gradient) and
 //    by ground-truth depth, each in thirds per scene: whether the error sits
 //    on weak texture (ambiguous matches) or on well-textured surfaces

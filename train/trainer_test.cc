@@ -352,6 +352,19 @@ TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnc
   const std::string text = FormatBreakdown(breakdown);
   EXPECT_NE(text.find("fine 3          <1%: "), std::string::npos) << text;
   EXPECT_NE(text.find("texture strong  <1%: "), std::string::npos) << text;
+
+  // With the photometric refinement: one more row, the evaluation table's
+  // with it (validation.cc refines the eval-mode output; the breakdown its
+  // last iteration), and the rows before it unchanged.
+  eval.eval_refinement = "ncc";
+  const ErrorBreakdown refined = EvaluateErrorBreakdown(weights, eval, 0);
+  ASSERT_EQ(refined.iterations.size(), 6u);
+  EXPECT_EQ(refined.iterations.back().label, "refined");
+  EXPECT_DOUBLE_EQ(refined.iterations[4].depth.within_2, last.depth.within_2);
+  const WideningResult refined_table = EvaluateWeights(weights, eval, {0}).front();
+  EXPECT_EQ(refined.iterations.back().depth.gt_pixels, refined_table.metrics.gt_pixels);
+  EXPECT_DOUBLE_EQ(refined.iterations.back().depth.within_1, refined_table.metrics.within_1);
+  EXPECT_DOUBLE_EQ(refined.iterations.back().depth.within_2, refined_table.metrics.within_2);
 }
 
 TEST(TrainerV2Test, EvaluationWithoutAHintOnlyForV2Weights) {
