@@ -19,6 +19,7 @@
 #include <fstream>
 #include <iostream>
 #include <optional>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -42,6 +43,14 @@
 #include "src/program_options.h"
 
 namespace {
+
+// A default shown in --help as a person writes it (0.2, not the double's
+// 17 digits).
+std::string FormatDefault(double value) {
+  std::ostringstream text;
+  text << value;
+  return text.str();
+}
 
 namespace fs = std::filesystem;
 namespace po = boost::program_options;
@@ -300,15 +309,18 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "--refinement ncc: hypotheses on each side of the network's depth.")
       ("refine_step_pixels",
        po::value<double>(&o.photometric.estimator.refinement_options.step_pixels)
-           ->default_value(o.photometric.estimator.refinement_options.step_pixels),
+           ->default_value(o.photometric.estimator.refinement_options.step_pixels,
+                           FormatDefault(o.photometric.estimator.refinement_options.step_pixels)),
        "--refinement ncc: their spacing along the epipolar line of the source where the "
        "match moves most, pixels.")
       ("refine_min_ncc", po::value<double>(&o.photometric.estimator.refinement_options.min_ncc)
-           ->default_value(o.photometric.estimator.refinement_options.min_ncc),
+           ->default_value(o.photometric.estimator.refinement_options.min_ncc,
+                           FormatDefault(o.photometric.estimator.refinement_options.min_ncc)),
        "--refinement ncc: the correlation needed to replace the network's depth.")
       ("refine_min_texture",
        po::value<double>(&o.photometric.estimator.refinement_options.min_texture)
-           ->default_value(o.photometric.estimator.refinement_options.min_texture),
+           ->default_value(o.photometric.estimator.refinement_options.min_texture,
+                           FormatDefault(o.photometric.estimator.refinement_options.min_texture)),
        "--refinement ncc: the reference window's grey-value standard deviation needed "
        "(grey values in [0, 1]).")
       ("threads", po::value<int>(&o.photometric.estimator.threads)->default_value(0),
