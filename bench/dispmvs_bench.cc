@@ -337,8 +337,7 @@ Measurement MeasureTime(DispMvsNet& net, const DispMvsInput& input, const Option
     synchronize();
     if (o.refine) {
       const auto refine_start = std::chrono::steady_clock::now();
-      dispmvs::model::RefineDepthPhotometrically(input.images, input.intrinsics, input.extrinsics,
-                                                 output.depth, output.valid, {});
+      dispmvs::model::RefineDepthPhotometrically(input, output, {});
       synchronize();
       refine_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - refine_start).count();
     }
@@ -370,8 +369,7 @@ int64_t MeasurePeakMemory(DispMvsNet& net, const DispMvsInput& input, const torc
   const auto pass = [&] {
     const dispmvs::model::DispMvsOutput output = net->forward(input);
     if (refine) {
-      dispmvs::model::RefineDepthPhotometrically(input.images, input.intrinsics, input.extrinsics,
-                                                 output.depth, output.valid, {});
+      dispmvs::model::RefineDepthPhotometrically(input, output, {});
     }
   };
   pass();

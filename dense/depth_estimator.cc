@@ -73,9 +73,7 @@ void EstimatorOptions::Check() const {
     throw std::invalid_argument("--coarse_iterations and --fine_iterations must be >= 0");
   }
   if (feature_cache_mb < 0) throw std::invalid_argument("--feature_cache_mb must be >= 0");
-  if (refinement != "ncc" && refinement != "none") {
-    throw std::invalid_argument("--refinement must be ncc or none, got '" + refinement + "'");
-  }
+  model::ParseRefinementMode(refinement, "--refinement");
   try {
     refinement_options.Check();
   } catch (const std::invalid_argument& error) {
@@ -118,7 +116,7 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   impl_->net->to(impl_->device);
   impl_->net->eval();
   impl_->net->set_precision(impl_->precision);
-  impl_->refine = options.refinement == "ncc";
+  impl_->refine = model::ParseRefinementMode(options.refinement, "--refinement");
   impl_->refinement = options.refinement_options;
 }
 
@@ -211,12 +209,9 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
   // start from the same random depths.
   const model::DispMvsOutput output =
       impl_->net->forward(input, at::make_generator<at::CPUGeneratorImpl>(seed));
-  torch::Tensor depth = output.depth;
-  if (impl_->refine) {
-    depth = model::RefineDepthPhotometrically(input.images, input.intrinsics, input.extrinsics,
-                                              output.depth, output.valid, impl_->refinement)
-                .depth;
-  }
+  const torch::Tensor depth =
+      impl_->refine ? model::RefineDepthPhotometrically(input, output, impl_->refinement).depth
+                    : output.depth;
   DepthEstimate estimate;
   estimate.depth = ToDenseArray(depth[0][0]);
   estimate.confidence = ToDenseArray(output.confidence[0][0] * output.valid[0][0]);

@@ -71,6 +71,13 @@ void PhotometricRefinementOptions::Check() const {
   if (!(min_texture >= 0 && std::isfinite(min_texture))) fail("min_texture must be >= 0");
 }
 
+bool ParseRefinementMode(const std::string& value, const std::string& option) {
+  if (value != "ncc" && value != "none") {
+    throw std::invalid_argument(option + " must be ncc or none, got '" + value + "'");
+  }
+  return value == "ncc";
+}
+
 PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                                                  const torch::Tensor& intrinsics,
                                                  const torch::Tensor& extrinsics,
@@ -85,12 +92,17 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   const int64_t h = images.size(3), w = images.size(4);
   const int64_t r = options.window_radius;
 
-  // Grey values; the reference's window statistics once, per source copy.
+  // Grey values; the reference's window statistics once, then a copy per
+  // source for the per-hypothesis arithmetic ([B*N,1,H,W]).
   const torch::Tensor grey = images.to(opts).mean(2);  // [B,V,H,W]
-  const torch::Tensor ref = grey.select(1, 0).unsqueeze(1).repeat_interleave(n, 0);  // [B*N,1,H,W]
+  const torch::Tensor reference = grey.narrow(1, 0, 1);  // [B,1,H,W]
+  const torch::Tensor reference_mean = WindowMean(reference, r);
+  const torch::Tensor reference_var =
+      torch::clamp_min(WindowMean(reference * reference, r) - reference_mean * reference_mean, 0);
+  const torch::Tensor ref = reference.repeat_interleave(n, 0);
+  const torch::Tensor ref_mean = reference_mean.repeat_interleave(n, 0);
+  const torch::Tensor ref_var = reference_var.repeat_interleave(n, 0);
   const torch::Tensor src = grey.narrow(1, 1, n).reshape({b * n, 1, h, w});
-  const torch::Tensor ref_mean = WindowMean(ref, r);
-  const torch::Tensor ref_var = torch::clamp_min(WindowMean(ref * ref, r) - ref_mean * ref_mean, 0);
 
   const torch::Tensor K = intrinsics.to(opts);
   const RelativePoses poses = ReferenceToSourcePoses(extrinsics.to(opts));
@@ -185,8 +197,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                    torch::zeros_like(curvature));
   const torch::Tensor w_new =
       w0 + (best_index.to(opts.dtype()) - static_cast<double>(options.steps) + offset) * dw;
-  const torch::Tensor textured = torch::sqrt(ref_var.view({b, n, h, w}).select(1, 0).unsqueeze(1)) >=
-                                 options.min_texture;
+  const torch::Tensor textured = torch::sqrt(reference_var) >= options.min_texture;
   const torch::Tensor refined = searchable & textured & (best_index > 0) & (best_index < last) &
                                 (best >= options.min_ncc) & (before > -1) & (after > -1) & (w_new > 0);
 
@@ -197,6 +208,13 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                               torch::where(usable, depth_in, torch::zeros_like(depth_in)));
   result.score = torch::where(searchable, best, torch::full_like(best, -1.0));
   return result;
+}
+
+PhotometricRefinement RefineDepthPhotometrically(const DispMvsInput& input,
+                                                 const DispMvsOutput& output,
+                                                 const PhotometricRefinementOptions& options) {
+  return RefineDepthPhotometrically(input.images, input.intrinsics, input.extrinsics, output.depth,
+                                    output.valid, options);
 }
 
 }  // namespace dispmvs::model

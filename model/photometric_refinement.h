@@ -39,6 +39,7 @@
 
 #include <torch/torch.h>
 
+#include "model/dispmvs_net.h"
 #include "model/photometric_refinement_options.h"
 
 namespace dispmvs::model {
@@ -57,6 +58,11 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                                                  const torch::Tensor& extrinsics,
                                                  const torch::Tensor& depth,
                                                  const torch::Tensor& valid,
+                                                 const PhotometricRefinementOptions& options);
+
+// The network's output refined on its own input.
+PhotometricRefinement RefineDepthPhotometrically(const DispMvsInput& input,
+                                                 const DispMvsOutput& output,
                                                  const PhotometricRefinementOptions& options);
 
 }  // namespace dispmvs::model

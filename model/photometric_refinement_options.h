@@ -4,6 +4,7 @@
 // (dense/depth_estimator.h) can hold them.
 
 #include <cstdint>
+#include <string>
 
 namespace dispmvs::model {
 
@@ -18,5 +19,9 @@ struct PhotometricRefinementOptions {
   // in [1, 64], step_pixels in (0, 8], min_ncc in [-1, 1], min_texture >= 0.
   void Check() const;
 };
+
+// The refinement mode of a command line: true for "ncc", false for "none";
+// throws std::invalid_argument "OPTION must be ncc or none, got 'VALUE'".
+bool ParseRefinementMode(const std::string& value, const std::string& option);
 
 }  // namespace dispmvs::model

@@ -161,10 +161,8 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
     }
     torch::Tensor final_depth = DepthOf(output.inv_depths.back());
     if (options.eval_refinement == "ncc") {
-      final_depth = model::RefineDepthPhotometrically(batch.input.images, batch.input.intrinsics,
-                                                      batch.input.extrinsics, final_depth,
-                                                      final_depth > 0, options.eval_refinement_options)
-                        .depth;
+      final_depth =
+          model::RefineDepthPhotometrically(batch.input, output, options.eval_refinement_options).depth;
       AddScores(batch, final_depth, torch::Tensor(), &refined);
     }
     const auto texture_bands = Thirds(LocalTexture(batch.input.images), batch.gt_valid);

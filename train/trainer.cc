@@ -152,15 +152,10 @@ void TrainOptions::Check(bool for_training) const {
     }
     if (value > 0 && for_training) fail(std::string(name) + " is for evaluation only");
   }
-  if (eval_refinement != "none" && eval_refinement != "ncc") {
-    fail("eval_refinement must be none or ncc, got '" + eval_refinement + "'");
+  if (model::ParseRefinementMode(eval_refinement, "eval_refinement") && for_training) {
+    fail("eval_refinement is for evaluation only");
   }
-  if (eval_refinement != "none" && for_training) fail("eval_refinement is for evaluation only");
-  try {
-    eval_refinement_options.Check();
-  } catch (const std::invalid_argument& error) {
-    fail(error.what());
-  }
+  eval_refinement_options.Check();
   try {
     model::ResolvePrecision(precision, torch::kCPU);
   } catch (const std::invalid_argument& error) {

@@ -59,10 +59,8 @@ WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSamp
     // between evaluations only because the weights do.
     auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
     if (options.eval_refinement == "ncc") {
-      output.depth = model::RefineDepthPhotometrically(batch.input.images, batch.input.intrinsics,
-                                                       batch.input.extrinsics, output.depth,
-                                                       output.valid, options.eval_refinement_options)
-                         .depth;
+      output.depth =
+          model::RefineDepthPhotometrically(batch.input, output, options.eval_refinement_options).depth;
     }
     sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
     if (!look_from_sources) continue;
