@@ -92,6 +92,7 @@ struct Options {
   int64_t warmup = 1;
   int64_t reps = 3;
   bool refine = false;  // --refinement ncc
+  dispmvs::model::PhotometricRefinementOptions refinement;  // --refine_propagation_rounds
 };
 
 constexpr const char* kUsage =
@@ -111,7 +112,9 @@ constexpr const char* kUsage =
     "  --warmup N               untimed passes first (default 1)\n"
     "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n"
     "  --refinement none|ncc    ncc: each pass also runs the photometric refinement of\n"
-    "                           dispmvs_colmap's default, timed as the 'refine' column (none)\n";
+    "                           dispmvs_colmap's default, timed as the 'refine' column (none)\n"
+    "  --refine_propagation_rounds K  with ncc: the refinement's propagation rounds\n"
+    "                           (dispmvs_colmap --refine_propagation_rounds) (0)\n";
 
 std::vector<std::string> SplitComma(const std::string& s) {
   std::vector<std::string> out;
@@ -191,6 +194,8 @@ Options ParseArgs(int argc, char** argv) {
         throw std::invalid_argument("--refinement must be none or ncc, got '" + value + "'");
       }
       o.refine = value == "ncc";
+    } else if (flag == "--refine_propagation_rounds") {
+      o.refinement.propagation_rounds = ParseInteger(flag, value, 0, 16);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {
@@ -337,7 +342,7 @@ Measurement MeasureTime(DispMvsNet& net, const DispMvsInput& input, const Option
     synchronize();
     if (o.refine) {
       const auto refine_start = std::chrono::steady_clock::now();
-      dispmvs::model::RefineDepthPhotometrically(input, output, {});
+      dispmvs::model::RefineDepthPhotometrically(input, output, o.refinement);
       synchronize();
       refine_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - refine_start).count();
     }
@@ -365,11 +370,11 @@ Measurement MeasureTime(DispMvsNet& net, const DispMvsInput& input, const Option
 // Peak memory of a pass: one pass to settle one-time allocations, then the
 // largest peak of two.
 int64_t MeasurePeakMemory(DispMvsNet& net, const DispMvsInput& input, const torch::Device& device,
-                          bool refine) {
+                          bool refine, const dispmvs::model::PhotometricRefinementOptions& refinement) {
   const auto pass = [&] {
     const dispmvs::model::DispMvsOutput output = net->forward(input);
     if (refine) {
-      dispmvs::model::RefineDepthPhotometrically(input, output, {});
+      dispmvs::model::RefineDepthPhotometrically(input, output, refinement);
     }
   };
   pass();
@@ -524,7 +529,7 @@ int main(int argc, char** argv) {
     // and would outlast any later timing; the child reports its peaks through
     // a pipe and exits before the timings start.
     const auto measure_memory = [&](DispMvsNet& net, const DispMvsInput& input, Row& row) {
-      row.m.peak_bytes = MeasurePeakMemory(net, input, device, o.refine);
+      row.m.peak_bytes = MeasurePeakMemory(net, input, device, o.refine, o.refinement);
     };
     if (device.is_cpu()) {
       const std::vector<int64_t> peaks = MeasureCpuMemoryInChild([&] {

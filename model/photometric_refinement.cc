@@ -1,18 +1,18 @@
 #include "model/photometric_refinement.h"
 
 #include <cmath>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "model/dispmvs_net.h"
 #include "model/geometry.h"
+#include "model/surface_ncc.h"
 #include "model/window_mean.h"
 
 namespace dispmvs::model {
 namespace {
-
-namespace F = torch::nn::functional;
 
 // Per pixel, which sources count: the better half (at least one) of those
 // whose window correlates validly at the network's depth, by that
@@ -33,6 +33,50 @@ torch::Tensor BetterHalfOfSources(const torch::Tensor& ncc, const torch::Tensor&
     rank += ((o > ranked) | ((o == ranked) & (index > other))).to(torch::kLong);
   }
   return (valid & (rank < keep)).to(ncc.scalar_type());
+}
+
+// t shifted so that out(y, x) = t(y + dy, x + dx), zero where that is outside.
+torch::Tensor Shifted(const torch::Tensor& t, int64_t dx, int64_t dy) {
+  const int64_t h = t.size(2), w = t.size(3);
+  torch::Tensor out = torch::zeros_like(t);
+  if (std::abs(dx) >= w || std::abs(dy) >= h) return out;
+  out.narrow(3, std::max<int64_t>(0, -dx), w - std::abs(dx))
+      .narrow(2, std::max<int64_t>(0, -dy), h - std::abs(dy))
+      .copy_(t.narrow(3, std::max<int64_t>(0, dx), w - std::abs(dx))
+                 .narrow(2, std::max<int64_t>(0, dy), h - std::abs(dy)));
+  return out;
+}
+
+// The slopes of the least-squares plane through the usable inverse depths
+// of the (2r+1)^2 window around every pixel (0 where too few are usable).
+std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopes(const torch::Tensor& w, const torch::Tensor& usable,
+                                                           int64_t radius) {
+  const int64_t h = w.size(2), wd = w.size(3);
+  const torch::Tensor m = usable.to(w.scalar_type());
+  const torch::Tensor x = (torch::arange(wd, w.options()) - 0.5 * static_cast<double>(wd - 1)).view({1, 1, 1, wd}).expand_as(w);
+  const torch::Tensor y = (torch::arange(h, w.options()) - 0.5 * static_cast<double>(h - 1)).view({1, 1, h, 1}).expand_as(w);
+  const torch::Tensor mw = m * w;
+  const torch::Tensor sums = WindowMean(torch::cat({m, m * x, m * y, m * x * x, m * x * y, m * y * y, mw, mw * x, mw * y}, 1), radius);
+  const auto c = [&](int64_t i) { return sums.narrow(1, i, 1); };
+  const torch::Tensor count = c(0).clamp_min(1e-6);
+  const torch::Tensor mx = c(1) / count, my = c(2) / count, mean_w = c(6) / count;
+  const torch::Tensor cxx = c(3) / count - mx * mx, cxy = c(4) / count - mx * my, cyy = c(5) / count - my * my;
+  const torch::Tensor cxw = c(7) / count - mx * mean_w, cyw = c(8) / count - my * mean_w;
+  const torch::Tensor det = cxx * cyy - cxy * cxy;
+  const torch::Tensor ok = (c(0) > 0.25) & (det > 1e-3);
+  const torch::Tensor safe = torch::where(ok, det, torch::ones_like(det));
+  return {torch::where(ok, (cyy * cxw - cxy * cyw) / safe, torch::zeros_like(w)),
+          torch::where(ok, (cxx * cyw - cxy * cxw) / safe, torch::zeros_like(w))};
+}
+
+// The plane of the pixel (dx, dy) away, extended to every pixel:
+// w(p + o) - o . slope(p + o); 0 where that pixel has no depth.
+torch::Tensor PlaneFromNeighbour(const torch::Tensor& w, const torch::Tensor& gx,
+                                 const torch::Tensor& gy, int64_t dx, int64_t dy) {
+  const torch::Tensor neighbour = Shifted(w, dx, dy);
+  const torch::Tensor plane = neighbour - static_cast<double>(dx) * Shifted(gx, dx, dy) -
+                              static_cast<double>(dy) * Shifted(gy, dx, dy);
+  return torch::where((neighbour > 0) & (plane > 0), plane, torch::zeros_like(plane));
 }
 
 void CheckShapes(const torch::Tensor& images, const torch::Tensor& intrinsics,
@@ -69,6 +113,14 @@ void PhotometricRefinementOptions::Check() const {
   if (!(step_pixels > 0 && step_pixels <= 8)) fail("step_pixels must be in (0, 8]");
   if (!(min_ncc >= -1 && min_ncc <= 1)) fail("min_ncc must be in [-1, 1]");
   if (!(min_texture >= 0 && std::isfinite(min_texture))) fail("min_texture must be >= 0");
+  if (propagation_rounds < 0 || propagation_rounds > 16) fail("propagation_rounds must be in [0, 16]");
+  if (propagation_distance < 1 || propagation_distance > 256) {
+    fail("propagation_distance must be in [1, 256]");
+  }
+  if (propagation_levels < 1 || propagation_levels > 16) fail("propagation_levels must be in [1, 16]");
+  if (propagation_slope_radius < 1 || propagation_slope_radius > 64) {
+    fail("propagation_slope_radius must be in [1, 64]");
+  }
 }
 
 bool ParseRefinementMode(const std::string& value, const std::string& option) {
@@ -113,14 +165,13 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   const torch::Tensor depth_in = depth.to(opts);
   const torch::Tensor usable = valid.to(torch::kBool) & (depth_in > 0) & torch::isfinite(depth_in);
   const torch::Tensor w0 = torch::where(usable, 1.0 / depth_in, torch::zeros_like(depth_in));
-  const torch::Tensor w0_per_source = w0.repeat_interleave(n, 0);
 
   // |dp_s/dw| = |b_xy a_z - a_xy b_z| / (a_z + w b_z)^2 (geometry.h): how far
   // the match moves per unit of inverse depth, in every source.
   const torch::Tensor a_z = pair.a.narrow(1, 2, 1), b_z = pair.b.narrow(1, 2, 1);
   const torch::Tensor along_x = pair.b.narrow(1, 0, 1) * a_z - pair.a.narrow(1, 0, 1) * b_z;
   const torch::Tensor along_y = pair.b.narrow(1, 1, 1) * a_z - pair.a.narrow(1, 1, 1) * b_z;
-  const torch::Tensor denominator = a_z + w0_per_source * b_z;
+  const torch::Tensor denominator = a_z + w0.repeat_interleave(n, 0) * b_z;
   // (Written out: LibTorch's norm over the channel dimension took ten times longer.)
   torch::Tensor rate = torch::sqrt(along_x * along_x + along_y * along_y) / (denominator * denominator);
   rate = torch::where((denominator > 0) & torch::isfinite(rate), rate, torch::zeros_like(rate));
@@ -129,43 +180,19 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   const torch::Tensor dw = torch::where(searchable, options.step_pixels / max_rate,
                                         torch::zeros_like(max_rate));
 
-  // The projection of w0 + k dw is (P + k Q) / (P_z + k Q_z) with
-  // P = a + w0 b and Q = dw b (geometry.h): two multiply-adds per hypothesis.
-  const torch::Tensor dw_per_source = dw.repeat_interleave(n, 0);
-  const torch::Tensor P = pair.a + w0_per_source * pair.b;  // [B*N,3,H,W]
-  const torch::Tensor Q = dw_per_source * pair.b;
-  const double x_scale = 2.0 / static_cast<double>(std::max<int64_t>(w - 1, 1));
-  const double y_scale = 2.0 / static_cast<double>(std::max<int64_t>(h - 1, 1));
   // A source counts where the window around the match lies inside its
   // image: the match at least r pixels from the border (the window's other
   // pixels are sampled at their own matches, which lie about as far from it
   // as they lie from the reference pixel).
   const double margin = static_cast<double>(r);
-  const double half_w = 0.5 * static_cast<double>(w - 1), half_h = 0.5 * static_cast<double>(h - 1);
-  const auto grid_sample = F::GridSampleFuncOptions().mode(torch::kBilinear).padding_mode(torch::kZeros).align_corners(true);
-  // Every source's NCC at hypothesis k, and whether it counts ([B,N,H,W] each).
-  const auto correlate = [&](int64_t k) {
-    const torch::Tensor projected = torch::add(P, Q, static_cast<double>(k));
-    const torch::Tensor z = projected.narrow(1, 2, 1);
-    const torch::Tensor wk = torch::add(w0_per_source, dw_per_source, static_cast<double>(k));
-    const torch::Tensor in_front = (z > 0) & (wk > 0);
-    const torch::Tensor inverse_z = torch::where(in_front, z.reciprocal(), torch::zeros_like(z));
-    const torch::Tensor x = projected.narrow(1, 0, 1) * inverse_z;
-    const torch::Tensor y = projected.narrow(1, 1, 1) * inverse_z;
-    const torch::Tensor inside = in_front & ((x - half_w).abs() <= half_w - margin) &
-                                 ((y - half_h).abs() <= half_h - margin);
-    const torch::Tensor grid = torch::stack({x.squeeze(1) * x_scale - 1.0, y.squeeze(1) * y_scale - 1.0}, -1);
-    const torch::Tensor sampled = F::grid_sample(src, grid, grid_sample);
-    // The three window means in one pass.
-    const torch::Tensor means = WindowMean(torch::cat({sampled, sampled * sampled, ref * sampled}, 1), r);
-    const torch::Tensor s_mean = means.narrow(1, 0, 1);
-    const torch::Tensor s_var = torch::clamp_min(means.narrow(1, 1, 1) - s_mean * s_mean, 0);
-    const torch::Tensor covariance = means.narrow(1, 2, 1) - ref_mean * s_mean;
-    const torch::Tensor ncc = covariance * torch::rsqrt(torch::clamp_min(ref_var * s_var, 1e-12));
-    const torch::Tensor ok = inside & (s_var > 1e-10);
-    return std::make_pair(ncc.view({b, n, h, w}), ok.view({b, n, h, w}));
+  // Every source's NCC where each reference pixel is at the inverse depth
+  // `surface` ([B,1,H,W]), and whether it counts ([B,N,H,W] each).
+  const auto correlate = [&](const torch::Tensor& surface) {
+    const SurfaceCorrelation c =
+        CorrelateAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, surface, r, margin);
+    return std::make_pair(c.ncc.view({b, n, h, w}), c.ok.view({b, n, h, w}));
   };
-  const auto [ncc_at_start, ok_at_start] = correlate(0);
+  const auto [ncc_at_start, ok_at_start] = correlate(w0);
   const torch::Tensor weights = BetterHalfOfSources(ncc_at_start, ok_at_start);
   const torch::Tensor weight_sum = weights.sum(1, /*keepdim=*/true);
   // A chosen source whose window leaves its image at some hypothesis scores
@@ -176,37 +203,91 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     return torch::where(weight_sum > 0, (per_source * weights).sum(1, true) / weight_sum.clamp_min(1),
                         torch::full_like(weight_sum, -1.0));
   };
-  std::vector<torch::Tensor> scores;
-  for (int64_t k = -options.steps; k <= options.steps; ++k) {
-    if (k == 0) {
-      scores.push_back(score(ncc_at_start, ok_at_start));
-    } else {
-      const auto [ncc, ok] = correlate(k);
-      scores.push_back(score(ncc, ok));
-    }
-  }
-  const torch::Tensor volume = torch::cat(scores, 1);  // [B,2K+1,H,W]
-  const auto [best, best_index] = volume.max(1, /*keepdim=*/true);
-  const int64_t last = 2 * options.steps;
-  const torch::Tensor before = volume.gather(1, torch::clamp_min(best_index - 1, 0));
-  const torch::Tensor after = volume.gather(1, torch::clamp_max(best_index + 1, last));
-  // Parabola through the best score and its neighbours: its vertex.
-  const torch::Tensor curvature = before - 2 * best + after;
-  const torch::Tensor offset =
-      torch::where(curvature < -1e-6, torch::clamp(0.5 * (before - after) / curvature, -0.5, 0.5),
-                   torch::zeros_like(curvature));
-  const torch::Tensor w_new =
-      w0 + (best_index.to(opts.dtype()) - static_cast<double>(options.steps) + offset) * dw;
   const torch::Tensor textured = torch::sqrt(reference_var) >= options.min_texture;
-  const torch::Tensor refined = searchable & textured & (best_index > 0) & (best_index < last) &
-                                (best >= options.min_ncc) & (before > -1) & (after > -1) & (w_new > 0);
+
+  // The search of +-steps hypotheses around `center` (inverse depth,
+  // [B,1,H,W]); `at_center`, when defined, is the score there already known.
+  // Returns the new inverse depth where the answer is clear, `center`
+  // elsewhere, with the score and where it was accepted.
+  struct Searched {
+    torch::Tensor w, best, accepted;
+  };
+  const auto search = [&](const torch::Tensor& center, int64_t steps, const torch::Tensor& at_center) {
+    std::vector<torch::Tensor> scores;
+    for (int64_t k = -steps; k <= steps; ++k) {
+      if (k == 0 && at_center.defined()) {
+        scores.push_back(at_center);
+      } else {
+        const auto [ncc, ok] = correlate(torch::add(center, dw, static_cast<double>(k)));
+        scores.push_back(score(ncc, ok));
+      }
+    }
+    const torch::Tensor volume = torch::cat(scores, 1);  // [B,2K+1,H,W]
+    const auto [best, best_index] = volume.max(1, /*keepdim=*/true);
+    const int64_t last = 2 * steps;
+    const torch::Tensor before = volume.gather(1, torch::clamp_min(best_index - 1, 0));
+    const torch::Tensor after = volume.gather(1, torch::clamp_max(best_index + 1, last));
+    // Parabola through the best score and its neighbours: its vertex.
+    const torch::Tensor curvature = before - 2 * best + after;
+    const torch::Tensor offset =
+        torch::where(curvature < -1e-6, torch::clamp(0.5 * (before - after) / curvature, -0.5, 0.5),
+                     torch::zeros_like(curvature));
+    const torch::Tensor w_new =
+        center + (best_index.to(opts.dtype()) - static_cast<double>(steps) + offset) * dw;
+    const torch::Tensor accepted = searchable & textured & (center > 0) & (best_index > 0) &
+                                   (best_index < last) & (best >= options.min_ncc) & (before > -1) &
+                                   (after > -1) & (w_new > 0);
+    return Searched{torch::where(accepted, w_new, center), torch::where(accepted, best, volume.narrow(1, steps, 1)),
+                    accepted};
+  };
+  const Searched first = search(w0, options.steps, score(ncc_at_start, ok_at_start));
+  torch::Tensor w_out = first.w;
+  torch::Tensor changed = first.accepted;
+  torch::Tensor best_out = first.best;
+  if (options.propagation_rounds > 0) {
+    // Propagation: every pixel tries the planes of pixels far away in four
+    // directions, on the sources chosen above, and keeps the best-scoring
+    // one; the jumps halve from propagation_distance over
+    // propagation_levels levels, so a right surface crosses a wrong block of
+    // the network's in a few steps (as PatchMatch's propagation does, but
+    // on whole maps, so every candidate costs one warp and window pass).
+    const auto surface_score = [&](const torch::Tensor& surface) {
+      const auto [ncc, ok] = correlate(surface);
+      return score(ncc, ok);
+    };
+    const torch::Tensor candidates_allowed = searchable & textured;
+    // Candidates stay within the inverse depths the network gave this view:
+    // a plane extrapolated over a long jump can reach inverse depths near 0,
+    // depths without bound, where no surface was seen.
+    const torch::Tensor w_floor =
+        torch::where(usable, w0, torch::full_like(w0, std::numeric_limits<float>::infinity())).amin({1, 2, 3}, true);
+    const torch::Tensor w_ceiling = w0.amax({1, 2, 3}, true);
+    torch::Tensor current = surface_score(w_out);
+    for (int64_t round = 0; round < options.propagation_rounds; ++round) {
+      int64_t distance = options.propagation_distance;
+      for (int64_t level = 0; level < options.propagation_levels && distance >= 1; ++level, distance /= 2) {
+        const auto [slope_x, slope_y] = LeastSquaresSlopes(w_out, usable, options.propagation_slope_radius);
+        const int64_t offsets[4][2] = {{distance, 0}, {-distance, 0}, {0, distance}, {0, -distance}};
+        for (const auto& offset : offsets) {
+          const torch::Tensor candidate = PlaneFromNeighbour(w_out, slope_x, slope_y, offset[0], offset[1]);
+          const torch::Tensor candidate_score = surface_score(candidate);
+          const torch::Tensor take = candidates_allowed & (candidate >= w_floor) & (candidate <= w_ceiling) &
+                                     (candidate_score >= options.min_ncc) & (candidate_score > current);
+          w_out = torch::where(take, candidate, w_out);
+          current = torch::where(take, candidate_score, current);
+          changed = changed | take;
+        }
+      }
+    }
+    best_out = torch::where(changed, current, best_out);
+  }
 
   PhotometricRefinement result;
   result.valid = usable;
-  result.refined = refined;
-  result.depth = torch::where(refined, 1.0 / torch::where(refined, w_new, torch::ones_like(w_new)),
+  result.refined = changed;
+  result.depth = torch::where(changed, 1.0 / torch::where(changed, w_out, torch::ones_like(w_out)),
                               torch::where(usable, depth_in, torch::zeros_like(depth_in)));
-  result.score = torch::where(searchable, best, torch::full_like(best, -1.0));
+  result.score = torch::where(searchable, best_out, torch::full_like(best_out, -1.0));
   return result;
 }
 

@@ -33,6 +33,19 @@
 // outside), and the reference window has texture (standard deviation of
 // grey values at least `min_texture`). Elsewhere the network's depth stays.
 //
+// Propagation (options.propagation_rounds > 0, off by default): after the
+// search, every pixel tries the planes of the pixels propagation_distance,
+// half that, ... (propagation_levels jumps) away in four directions: the
+// neighbour's inverse depth extended by the slopes of the least-squares
+// plane through the current map around it (inverse depth is affine in the
+// pixel coordinates on a plane). A candidate replaces the current depth
+// where it scores better (the same NCC on the same sources), at least
+// min_ncc, on a textured window and within the inverse depths the network
+// gave the view. The right surface then spreads over blocks where the
+// network's match was beyond the search's reach, as in PatchMatch; each
+// candidate is a whole shifted map, one warp and window pass like one
+// hypothesis of the search.
+//
 // Runs without autograd on any device; images [B,V,3,H,W] as in
 // DispMvsInput (view 0 the reference), intrinsics in the pixel-index
 // convention at the images' resolution.
@@ -47,7 +60,7 @@ namespace dispmvs::model {
 struct PhotometricRefinement {
   torch::Tensor depth;    // [B,1,H,W], 0 where invalid
   torch::Tensor valid;    // [B,1,H,W] bool: the input's valid mask (refinement adds none)
-  torch::Tensor refined;  // [B,1,H,W] bool: where the search replaced the depth
+  torch::Tensor refined;  // [B,1,H,W] bool: where the search or propagation replaced the depth
   torch::Tensor score;    // [B,1,H,W] the best NCC found, -1 where none was computed
 };
 

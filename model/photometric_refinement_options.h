@@ -14,9 +14,19 @@ struct PhotometricRefinementOptions {
   double step_pixels = 1.0;   // their spacing in the source with most parallax, pixels
   double min_ncc = 0.2;       // the best score needed to replace the network's depth
   double min_texture = 0.01;  // the reference window's grey-value std needed (images in [0, 1])
+  // Propagation after the search (photometric_refinement.h), 0 rounds = off:
+  // candidates are the planes of the pixels `propagation_distance`, half
+  // that, ... (`propagation_levels` jumps) away in four directions, their
+  // slopes fitted to the current map over (2 radius + 1)^2 windows.
+  int64_t propagation_rounds = 0;
+  int64_t propagation_distance = 32;
+  int64_t propagation_levels = 4;
+  int64_t propagation_slope_radius = 8;
 
   // Throws std::invalid_argument naming the field: radius in [1, 15], steps
-  // in [1, 64], step_pixels in (0, 8], min_ncc in [-1, 1], min_texture >= 0.
+  // in [1, 64], step_pixels in (0, 8], min_ncc in [-1, 1], min_texture >= 0,
+  // propagation rounds in [0, 16], distance in [1, 256], levels in [1, 16],
+  // slope radius in [1, 64].
   void Check() const;
 };
 

@@ -167,6 +167,46 @@ TEST(PhotometricRefinementTest, OneSourceIsEnough) {
   EXPECT_LT(error.median().item<float>(), 0.006);  // measured 0.44 %, from 8 %
 }
 
+// A block of the start at half the true depth: its matches are about ten
+// pixels off, beyond the +-6 pixel search, so only propagation from the right
+// depth around it can repair it.
+TEST(PhotometricRefinementTest, PropagationRepairsABlockBeyondTheSearch) {
+  const PlaneScene scene = MakePlaneScene();
+  const torch::Tensor valid = torch::ones_like(scene.depth, torch::kBool);
+  torch::Tensor block = torch::zeros_like(valid);
+  block.index_put_({0, 0, Slice(16, 32), Slice(26, 46)}, true);
+  const torch::Tensor start = torch::where(block, scene.depth * 0.5, scene.depth * 1.03);
+  const auto block_error = [&](const PhotometricRefinementOptions& options) {
+    const PhotometricRefinement out =
+        RefineDepthPhotometrically(scene.images, scene.intrinsics, scene.extrinsics, start, valid, options);
+    return RelativeError(out.depth, scene.depth).masked_select(block).median().item<float>();
+  };
+  PhotometricRefinementOptions search_only;
+  EXPECT_GT(block_error(search_only), 0.3);  // measured 0.50: the block stays where it was
+  PhotometricRefinementOptions propagated;
+  propagated.propagation_rounds = 2;
+  propagated.propagation_distance = 16;
+  EXPECT_LT(block_error(propagated), 0.005);  // measured 0.21 %
+}
+
+// On an exact plane the propagated candidates are the plane itself (inverse
+// depth is affine in the pixel coordinates and the fitted slopes are exact),
+// so propagation keeps the true depth where the search left it.
+TEST(PhotometricRefinementTest, PropagationKeepsTheTrueDepth) {
+  const PlaneScene scene = MakePlaneScene();
+  const torch::Tensor valid = torch::ones_like(scene.depth, torch::kBool);
+  PhotometricRefinementOptions propagated;
+  propagated.propagation_rounds = 2;
+  const PhotometricRefinement out = RefineDepthPhotometrically(
+      scene.images, scene.intrinsics, scene.extrinsics, scene.depth, valid, propagated);
+  const torch::Tensor error = RelativeError(out.depth, scene.depth).masked_select(Interior(6));
+  // Measured: median 0.19 %, 0.99 within 1 % (the search alone: 0.39 %, 0.93:
+  // the planes fitted over 17 x 17 pixels are finer than its parabola).
+  EXPECT_LT(error.median().item<float>(), 0.003);
+  EXPECT_GT((error < 0.01).to(torch::kFloat32).mean().item<float>(), 0.95);
+  EXPECT_TRUE(out.valid.all().item<bool>());
+}
+
 TEST(PhotometricRefinementTest, ChecksOptionsAndShapes) {
   const auto rejects = [](PhotometricRefinementOptions o, const std::string& field) {
     try {
@@ -191,6 +231,18 @@ TEST(PhotometricRefinementTest, ChecksOptionsAndShapes) {
   o = {};
   o.min_texture = -1;
   rejects(o, "min_texture");
+  o = {};
+  o.propagation_rounds = -1;
+  rejects(o, "propagation_rounds");
+  o = {};
+  o.propagation_distance = 0;
+  rejects(o, "propagation_distance");
+  o = {};
+  o.propagation_levels = 0;
+  rejects(o, "propagation_levels");
+  o = {};
+  o.propagation_slope_radius = 0;
+  rejects(o, "propagation_slope_radius");
   EXPECT_NO_THROW(PhotometricRefinementOptions{}.Check());
 
   const PlaneScene scene = MakePlaneScene();

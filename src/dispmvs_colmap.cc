@@ -323,6 +323,26 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
                            FormatDefault(o.photometric.estimator.refinement_options.min_texture)),
        "--refinement ncc: the reference window's grey-value standard deviation needed "
        "(grey values in [0, 1]).")
+      ("refine_propagation_rounds",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.propagation_rounds)
+           ->default_value(o.photometric.estimator.refinement_options.propagation_rounds),
+       "--refinement ncc: rounds of propagation after the search, 0 = none: every pixel "
+       "tries the planes of the pixels refine_propagation_distance, half that, ... "
+       "(refine_propagation_levels jumps) away in four directions and keeps the one that "
+       "correlates best, so that right depth spreads over the network's wrong blocks.")
+      ("refine_propagation_distance",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.propagation_distance)
+           ->default_value(o.photometric.estimator.refinement_options.propagation_distance),
+       "--refinement ncc: the propagation's longest jump, pixels.")
+      ("refine_propagation_levels",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.propagation_levels)
+           ->default_value(o.photometric.estimator.refinement_options.propagation_levels),
+       "--refinement ncc: jumps per propagation round, each half the one before.")
+      ("refine_propagation_slope_radius",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.propagation_slope_radius)
+           ->default_value(o.photometric.estimator.refinement_options.propagation_slope_radius),
+       "--refinement ncc: a propagated plane's slope is fitted to the depth over "
+       "(2r+1) x (2r+1) pixels.")
       ("threads", po::value<int>(&o.photometric.estimator.threads)->default_value(0),
        "CPU threads for the network; 0 = one per core.")
       ("seed", po::value<uint64_t>(&o.photometric.seed)->default_value(0),

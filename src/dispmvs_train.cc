@@ -55,6 +55,9 @@ options (default):
   --eval_refine_steps K       evaluation only, with ncc: hypotheses on each side (dispmvs_colmap
                               --refine_steps)
   --eval_refine_min_ncc C     evaluation only, with ncc: correlation needed (--refine_min_ncc)
+  --eval_refine_propagation_rounds K
+                              evaluation only, with ncc: rounds of propagation after the search
+                              (--refine_propagation_rounds)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -236,6 +239,9 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--eval_refinement") o.eval_refinement = value;
     else if (flag == "--eval_refine_steps") o.eval_refinement_options.steps = ParseInt(flag, value);
     else if (flag == "--eval_refine_min_ncc") o.eval_refinement_options.min_ncc = ParseDouble(flag, value);
+    else if (flag == "--eval_refine_propagation_rounds") {
+      o.eval_refinement_options.propagation_rounds = ParseInt(flag, value);
+    }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
     else if (flag == "--difficulty_ramp_steps") o.difficulty_ramp_steps = ParseInt(flag, value);

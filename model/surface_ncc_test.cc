@@ -1,0 +1,100 @@
+#include "model/surface_ncc.h"
+
+#include <gtest/gtest.h>
+
+#include <stdexcept>
+
+#include <torch/torch.h>
+
+#include "model/geometry.h"
+
+namespace dispmvs::model {
+namespace {
+
+struct Inputs {
+  torch::Tensor source, reference, reference_mean, reference_var, a, b, surface;
+};
+
+// Two batch items with three sources each, real epipolar pairs (one source
+// behind part of the scene's rays, one looking away to the side) and a
+// surface with invalid, negative and far values: every branch of the
+// sampling is taken.
+Inputs MakeInputs(int64_t radius) {
+  torch::manual_seed(3);
+  const int64_t b = 2, n = 3, h = 37, w = 53;
+  Inputs in;
+  in.source = torch::rand({b * n, 1, h, w});
+  const torch::Tensor reference = torch::rand({b, 1, h, w});
+  in.reference = reference.repeat_interleave(n, 0);
+  const auto mean = [&](const torch::Tensor& x) {
+    return torch::nn::functional::avg_pool2d(
+        x, torch::nn::functional::AvgPool2dFuncOptions(2 * radius + 1).stride(1).padding(radius).count_include_pad(false));
+  };
+  in.reference_mean = mean(in.reference);
+  in.reference_var = torch::clamp_min(mean(in.reference * in.reference) - in.reference_mean.square(), 0);
+  const torch::Tensor K = torch::tensor({40.0f, 0.0f, 26.0f, 0.0f, 42.0f, 18.0f, 0.0f, 0.0f, 1.0f}).view({1, 3, 3});
+  std::vector<torch::Tensor> rotations, translations;
+  for (int64_t i = 0; i < b * n; ++i) {
+    const double angle = 0.05 * static_cast<double>(i) - 0.1;
+    rotations.push_back(torch::tensor({std::cos(angle), 0.0, std::sin(angle), 0.0, 1.0, 0.0, -std::sin(angle), 0.0,
+                                       std::cos(angle)},
+                                      torch::kFloat32)
+                            .view({3, 3}));
+    translations.push_back(torch::tensor({0.4 - 0.2 * static_cast<double>(i), 0.1, i == 2 ? 3.0 : -0.05},
+                                         torch::kFloat32));
+  }
+  const EpipolarPair pair = MakeEpipolarPair(K.expand({b * n, 3, 3}), K.expand({b * n, 3, 3}),
+                                             torch::stack(rotations), torch::stack(translations), h, w);
+  in.a = pair.a;
+  in.b = pair.b;
+  in.surface = 0.1 + torch::rand({b, 1, h, w}) * 0.6;
+  in.surface.index_put_({0, 0, torch::indexing::Slice(0, 5)}, 0.0);
+  in.surface.index_put_({1, 0, torch::indexing::Slice(10, 12)}, -0.3);
+  in.surface.index_put_({1, 0, torch::indexing::Slice(20, 22)}, 5.0);
+  return in;
+}
+
+TEST(SurfaceNccTest, CpuPassEqualsTheOperations) {
+  for (const int64_t radius : {1, 3}) {
+    for (const bool per_pixel_b : {false, true}) {
+      Inputs in = MakeInputs(radius);
+      if (per_pixel_b) in.b = in.b.expand_as(in.a).contiguous() * 1.01;
+      const SurfaceCorrelation fast = CorrelateAlongSurface(in.source, in.reference, in.reference_mean,
+                                                            in.reference_var, in.a, in.b, in.surface, radius, radius);
+      const SurfaceCorrelation ops = CorrelateAlongSurfaceByOps(
+          in.source, in.reference, in.reference_mean, in.reference_var, in.a, in.b, in.surface, radius, radius);
+      ASSERT_EQ(fast.ncc.sizes(), ops.ncc.sizes());
+      // Matches exactly on the border between counting and not may flip
+      // with the last bit of the division: allow a handful.
+      const int64_t differing = (fast.ok != ops.ok).sum().item<int64_t>();
+      EXPECT_LE(differing, 3) << "radius " << radius;
+      const int64_t counted = ops.ok.sum().item<int64_t>();
+      EXPECT_GT(counted, fast.ok.numel() / 4);  // the check sees real matches
+      EXPECT_LT(counted, fast.ok.numel());      // and ones that do not count
+      const torch::Tensor both = fast.ok & ops.ok;
+      EXPECT_LT((fast.ncc - ops.ncc).abs().masked_select(both).max().item<float>(), 2e-4)
+          << "radius " << radius << " per-pixel b " << per_pixel_b;
+    }
+  }
+}
+
+TEST(SurfaceNccTest, RefusesMismatchedShapes) {
+  const Inputs in = MakeInputs(2);
+  EXPECT_THROW(CorrelateAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a, in.b,
+                                     in.surface.narrow(3, 0, 5), 2, 2),
+               std::invalid_argument);
+  EXPECT_THROW(CorrelateAlongSurface(in.source, in.reference.narrow(0, 0, 2), in.reference_mean, in.reference_var,
+                                     in.a, in.b, in.surface, 2, 2),
+               std::invalid_argument);
+  EXPECT_THROW(CorrelateAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a,
+                                     in.b.narrow(1, 0, 2), in.surface, 2, 2),
+               std::invalid_argument);
+  // A batch of surfaces that does not divide the sources.
+  EXPECT_THROW(CorrelateAlongSurface(in.source.narrow(0, 0, 5), in.reference.narrow(0, 0, 5),
+                                     in.reference_mean.narrow(0, 0, 5), in.reference_var.narrow(0, 0, 5),
+                                     in.a.narrow(0, 0, 5), in.b.narrow(0, 0, 5), in.surface, 2, 2),
+               std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace dispmvs::model
