@@ -6,7 +6,9 @@
 # dispmvs_bench --device cuda at 640x512 and 1600x1152, N = 5, for model v2
 # and the paper's design in both sizes, with the GRU update in fp32 and in
 # bf16 (--precision; dispmvs_colmap's auto keeps fp32 on CUDA until this
-# table says otherwise). Leaves gpu_bench.md (the command, the
+# table says otherwise), then model v2 with the photometric refinement
+# (--refinement ncc, without and with two rounds of propagation) at the
+# first size. Leaves gpu_bench.md (the command, the
 # GPU's name and the table for docs/benchmarks.md) in --out ($OUT, else
 # out/gpu_bench).
 #
@@ -46,13 +48,35 @@ command=("$bench" --device "$device" --sizes "$sizes" --config "$configs" --prec
          --reps "$reps" --warmup "$warmup")
 echo "running: ${command[*]}"
 "${command[@]}" > "$work/table.txt" 2> "$work/bench.err" || { cat "$work/bench.err" "$work/table.txt"; exit 1; }
+# The photometric refinement after the network (dispmvs_colmap's default
+# search, then with two rounds of propagation) at the first size: its
+# LibTorch path on the device, timed in the 'refine' column.
+refine_commands=()
+for rounds in 0 2; do
+  refine_command=("$bench" --device "$device" --sizes "${sizes%%,*}" --config small_v2 --precision fp32
+                  --sources "$sources" --reps "$reps" --warmup "$warmup" --refinement ncc
+                  --refine_propagation_rounds "$rounds")
+  refine_commands+=("${refine_command[*]}")
+  echo "running: ${refine_command[*]}"
+  "${refine_command[@]}" > "$work/refine_$rounds.txt" 2>> "$work/bench.err" ||
+    { cat "$work/bench.err" "$work/refine_$rounds.txt"; exit 1; }
+done
 {
   echo "# dispmvs_bench on $(nvidia-smi --query-gpu=name --format=csv,noheader 2>/dev/null | head -1 || echo "$device"), $(date -u +%Y-%m-%d)"
   echo
   echo '```sh'
   echo "bench/gpu_bench.sh   # runs: ${command[*]}" | sed "s|$build/||"
+  for refine_command in "${refine_commands[@]}"; do
+    echo "#   then: $refine_command" | sed "s|$build/||"
+  done
   echo '```'
   echo
   cat "$work/table.txt"
+  for rounds in 0 2; do
+    echo
+    echo "With the photometric refinement (--refinement ncc --refine_propagation_rounds $rounds):"
+    echo
+    cat "$work/refine_$rounds.txt"
+  done
 } > "$out/gpu_bench.md"
 cat "$out/gpu_bench.md"

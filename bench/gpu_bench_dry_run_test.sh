@@ -20,4 +20,10 @@ for config in small_v2 small paper_v2 paper; do
     done
   done
 done
+# The refinement's two tables: small_v2 in fp32 at the first size, with the
+# refinement's share of the time.
+[ "$(grep -c "^With the photometric refinement" "$md")" = 2 ] || fail "no refinement tables"
+[ "$(grep -c "^| small_v2 | fp32 | [0-9.]*M | [0-9]*+[0-9]* | 64x48 | " "$md")" = 3 ] ||
+  fail "no refinement rows for small_v2 in fp32 at 64x48"
+grep -q "refine" "$md" || fail "no refine column"
 echo "PASS"
