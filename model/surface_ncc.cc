@@ -5,6 +5,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "model/window_mean.h"
 
@@ -37,19 +38,22 @@ void CheckShapes(const torch::Tensor& source, const torch::Tensor& reference,
   }
 }
 
-// The window products of one source: its sampled values v, v^2 and the
-// reference times v ([3,H,W] at `products`), and where the match counts.
-// b holds one vector per pixel (b_per_pixel) or one for the whole plane.
-void SamplePlane(const float* source, const float* reference, const float* a, const float* b,
-                 bool b_per_pixel, const float* surface, int64_t h, int64_t w, double margin,
-                 float* products, bool* inside) {
-  const int64_t hw = h * w;
-  const int64_t b_step = b_per_pixel ? 1 : 0, b_channel = b_per_pixel ? hw : 1;
-  const float half_w = 0.5f * static_cast<float>(w - 1), half_h = 0.5f * static_cast<float>(h - 1);
-  const float limit_x = half_w - static_cast<float>(margin), limit_y = half_h - static_cast<float>(margin);
-  for (int64_t p = 0; p < hw; ++p) {
+// One source plane's sampling: where reference pixel p, at inverse depth
+// surface[p], falls in the source (bilinear, zero outside the image, as
+// grid_sample with align_corners), and whether the match counts.
+struct PlaneSampler {
+  const float* source;
+  const float* a;  // [3,H,W]
+  const float* b;  // [3,H,W] or [3]
+  const float* surface;
+  int64_t h, w;
+  bool b_per_pixel;
+  float half_w, half_h, limit_x, limit_y;
+
+  float Sample(int64_t p, bool* inside) const {
+    const int64_t hw = h * w;
+    const int64_t q = b_per_pixel ? p : 0, b_channel = b_per_pixel ? hw : 1;
     const float inverse_depth = surface[p];
-    const int64_t q = p * b_step;
     const float px = a[p] + inverse_depth * b[q];
     const float py = a[hw + p] + inverse_depth * b[b_channel + q];
     const float pz = a[2 * hw + p] + inverse_depth * b[2 * b_channel + q];
@@ -59,22 +63,85 @@ void SamplePlane(const float* source, const float* reference, const float* a, co
     // neighbours' windows all the same.
     const float inverse_z = in_front ? 1.0f / pz : 0.0f;
     const float x = px * inverse_z, y = py * inverse_z;
-    inside[p] = in_front && std::abs(x - half_w) <= limit_x && std::abs(y - half_h) <= limit_y;
-    // Bilinear, zero outside the image (grid_sample with align_corners).
-    float value = 0;
-    if (std::isfinite(x) && std::isfinite(y)) {
-      const float x0f = std::floor(x), y0f = std::floor(y);
-      const int64_t x0 = static_cast<int64_t>(x0f), y0 = static_cast<int64_t>(y0f);
-      const float fx = x - x0f, fy = y - y0f;
-      const auto at = [&](int64_t yy, int64_t xx) {
-        return (xx >= 0 && xx < w && yy >= 0 && yy < h) ? source[yy * w + xx] : 0.0f;
-      };
-      value = (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1)) +
-              fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
+    *inside = in_front && std::abs(x - half_w) <= limit_x && std::abs(y - half_h) <= limit_y;
+    if (!(std::isfinite(x) && std::isfinite(y))) return 0.0f;
+    const float x0f = std::floor(x), y0f = std::floor(y);
+    const float fx = x - x0f, fy = y - y0f;
+    if (x0f >= 0 && y0f >= 0 && x0f + 1 < static_cast<float>(w) && y0f + 1 < static_cast<float>(h)) {
+      const float* row = source + static_cast<int64_t>(y0f) * w + static_cast<int64_t>(x0f);
+      return (1 - fy) * ((1 - fx) * row[0] + fx * row[1]) + fy * ((1 - fx) * row[w] + fx * row[w + 1]);
     }
-    products[p] = value;
-    products[hw + p] = value * value;
-    products[2 * hw + p] = reference[p] * value;
+    if (x0f < -1 || y0f < -1 || x0f >= static_cast<float>(w) || y0f >= static_cast<float>(h)) return 0.0f;
+    const int64_t x0 = static_cast<int64_t>(x0f), y0 = static_cast<int64_t>(y0f);
+    const auto at = [&](int64_t yy, int64_t xx) {
+      return (xx >= 0 && xx < w && yy >= 0 && yy < h) ? source[yy * w + xx] : 0.0f;
+    };
+    return (1 - fy) * ((1 - fx) * at(y0, x0) + fx * at(y0, x0 + 1)) +
+           fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
+  }
+};
+
+// One source plane in one streaming pass: rows are sampled as the window
+// reaches them into a ring of 2r + 2 rows, column sums of v, v^2 and
+// reference * v move down with the window (in double, so that adding and
+// removing 2r + 1 rows at a time leaves no drift), and each output row's
+// window sums are a running sum along those columns. Nothing of full size is
+// written but the NCC and the flags.
+void CorrelatePlane(const PlaneSampler& sampler, const float* reference, const float* reference_mean,
+                    const float* reference_var, int64_t r, float* ncc, bool* ok) {
+  const int64_t h = sampler.h, w = sampler.w;
+  const int64_t ring = 2 * r + 2;
+  std::vector<float> values(static_cast<size_t>(ring * w));
+  std::vector<double> columns(static_cast<size_t>(3 * w), 0.0);
+  double* col_v = columns.data();
+  double* col_vv = col_v + w;
+  double* col_rv = col_vv + w;
+  // Adds (sign +1) or removes (-1) row k of the ring to the column sums;
+  // sampling it first when it comes in (its inside flags go to ok's row).
+  const auto take_row = [&](int64_t k, double sign) {
+    float* v = values.data() + (k % ring) * w;
+    const float* ref_row = reference + k * w;
+    if (sign > 0) {
+      for (int64_t j = 0; j < w; ++j) v[j] = sampler.Sample(k * w + j, ok + k * w + j);
+    }
+    for (int64_t j = 0; j < w; ++j) {
+      const double value = v[j];
+      col_v[j] += sign * value;
+      col_vv[j] += sign * static_cast<double>(v[j] * v[j]);
+      col_rv[j] += sign * static_cast<double>(ref_row[j] * v[j]);
+    }
+  };
+  for (int64_t k = 0; k <= std::min(r, h - 1); ++k) take_row(k, 1.0);
+  for (int64_t i = 0; i < h; ++i) {
+    const int64_t rows = std::min(i + r, h - 1) - std::max<int64_t>(i - r, 0) + 1;
+    double s_v = 0, s_vv = 0, s_rv = 0;
+    for (int64_t j = 0; j <= std::min(r, w - 1); ++j) {
+      s_v += col_v[j];
+      s_vv += col_vv[j];
+      s_rv += col_rv[j];
+    }
+    for (int64_t j = 0; j < w; ++j) {
+      const int64_t cols = std::min(j + r, w - 1) - std::max<int64_t>(j - r, 0) + 1;
+      const double inverse_count = 1.0 / static_cast<double>(rows * cols);
+      const int64_t p = i * w + j;
+      const float s_mean = static_cast<float>(s_v * inverse_count);
+      const float s_var = std::max(static_cast<float>(s_vv * inverse_count) - s_mean * s_mean, 0.0f);
+      const float covariance = static_cast<float>(s_rv * inverse_count) - reference_mean[p] * s_mean;
+      ncc[p] = covariance / std::sqrt(std::max(reference_var[p] * s_var, 1e-12f));
+      ok[p] = ok[p] && s_var > 1e-10f;
+      if (j + r + 1 < w) {
+        s_v += col_v[j + r + 1];
+        s_vv += col_vv[j + r + 1];
+        s_rv += col_rv[j + r + 1];
+      }
+      if (j - r >= 0) {
+        s_v -= col_v[j - r];
+        s_vv -= col_vv[j - r];
+        s_rv -= col_rv[j - r];
+      }
+    }
+    if (i + r + 1 < h) take_row(i + r + 1, 1.0);
+    if (i - r >= 0) take_row(i - r, -1.0);
   }
 }
 
@@ -88,37 +155,28 @@ SurfaceCorrelation CorrelateAlongSurfaceCpu(const torch::Tensor& source, const t
   const bool b_per_pixel = b.size(2) == h && b.size(3) == w && hw > 1;
   const int64_t b_plane = b_per_pixel ? 3 * hw : 3;
   const torch::Tensor src = source.contiguous(), ref = reference.contiguous();
-  const torch::Tensor a_c = a.contiguous(), b_c = b.contiguous(), surface_c = surface.contiguous();
-  torch::Tensor products = torch::empty({planes, 3, h, w}, source.options());
-  torch::Tensor inside = torch::empty({planes, 1, h, w}, source.options().dtype(torch::kBool));
-  at::parallel_for(0, planes, 1, [&](int64_t begin, int64_t end) {
-    for (int64_t i = begin; i < end; ++i) {
-      SamplePlane(src.data_ptr<float>() + i * hw, ref.data_ptr<float>() + i * hw,
-                  a_c.data_ptr<float>() + i * 3 * hw, b_c.data_ptr<float>() + i * b_plane, b_per_pixel,
-                  surface_c.data_ptr<float>() + (i / n) * hw, h, w, margin,
-                  products.data_ptr<float>() + i * 3 * hw, inside.data_ptr<bool>() + i * hw);
-    }
-  });
-  const torch::Tensor means = WindowMean(products, radius);
   const torch::Tensor mean_c = reference_mean.contiguous(), var_c = reference_var.contiguous();
+  const torch::Tensor a_c = a.contiguous(), b_c = b.contiguous(), surface_c = surface.contiguous();
   SurfaceCorrelation result;
   result.ncc = torch::empty({planes, 1, h, w}, source.options());
-  result.ok = torch::empty_like(inside);
+  result.ok = torch::empty({planes, 1, h, w}, source.options().dtype(torch::kBool));
+  const float half_w = 0.5f * static_cast<float>(w - 1), half_h = 0.5f * static_cast<float>(h - 1);
   at::parallel_for(0, planes, 1, [&](int64_t begin, int64_t end) {
     for (int64_t i = begin; i < end; ++i) {
-      const float* m = means.data_ptr<float>() + i * 3 * hw;
-      const float* ref_mean = mean_c.data_ptr<float>() + i * hw;
-      const float* ref_var = var_c.data_ptr<float>() + i * hw;
-      const bool* in = inside.data_ptr<bool>() + i * hw;
-      float* ncc = result.ncc.data_ptr<float>() + i * hw;
-      bool* ok = result.ok.data_ptr<bool>() + i * hw;
-      for (int64_t p = 0; p < hw; ++p) {
-        const float s_mean = m[p];
-        const float s_var = std::max(m[hw + p] - s_mean * s_mean, 0.0f);
-        const float covariance = m[2 * hw + p] - ref_mean[p] * s_mean;
-        ncc[p] = covariance / std::sqrt(std::max(ref_var[p] * s_var, 1e-12f));
-        ok[p] = in[p] && s_var > 1e-10f;
-      }
+      const PlaneSampler sampler{src.data_ptr<float>() + i * hw,
+                                 a_c.data_ptr<float>() + i * 3 * hw,
+                                 b_c.data_ptr<float>() + i * b_plane,
+                                 surface_c.data_ptr<float>() + (i / n) * hw,
+                                 h,
+                                 w,
+                                 b_per_pixel,
+                                 half_w,
+                                 half_h,
+                                 half_w - static_cast<float>(margin),
+                                 half_h - static_cast<float>(margin)};
+      CorrelatePlane(sampler, ref.data_ptr<float>() + i * hw, mean_c.data_ptr<float>() + i * hw,
+                     var_c.data_ptr<float>() + i * hw, radius, result.ncc.data_ptr<float>() + i * hw,
+                     result.ok.data_ptr<bool>() + i * hw);
     }
   });
   return result;

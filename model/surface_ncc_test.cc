@@ -19,9 +19,9 @@ struct Inputs {
 // behind part of the scene's rays, one looking away to the side) and a
 // surface with invalid, negative and far values: every branch of the
 // sampling is taken.
-Inputs MakeInputs(int64_t radius) {
+Inputs MakeInputs(int64_t radius, int64_t h = 37, int64_t w = 53) {
   torch::manual_seed(3);
-  const int64_t b = 2, n = 3, h = 37, w = 53;
+  const int64_t b = 2, n = 3;
   Inputs in;
   in.source = torch::rand({b * n, 1, h, w});
   const torch::Tensor reference = torch::rand({b, 1, h, w});
@@ -48,9 +48,9 @@ Inputs MakeInputs(int64_t radius) {
   in.a = pair.a;
   in.b = pair.b;
   in.surface = 0.1 + torch::rand({b, 1, h, w}) * 0.6;
-  in.surface.index_put_({0, 0, torch::indexing::Slice(0, 5)}, 0.0);
-  in.surface.index_put_({1, 0, torch::indexing::Slice(10, 12)}, -0.3);
-  in.surface.index_put_({1, 0, torch::indexing::Slice(20, 22)}, 5.0);
+  in.surface.index_put_({0, 0, torch::indexing::Slice(0, std::min<int64_t>(5, h / 2))}, 0.0);
+  in.surface.index_put_({1, 0, torch::indexing::Slice(h / 4, h / 4 + 2)}, -0.3);
+  in.surface.index_put_({1, 0, torch::indexing::Slice(h / 2, h / 2 + 2)}, 5.0);
   return in;
 }
 
@@ -76,6 +76,19 @@ TEST(SurfaceNccTest, CpuPassEqualsTheOperations) {
           << "radius " << radius << " per-pixel b " << per_pixel_b;
     }
   }
+}
+
+// Images smaller than the window: every window is clipped on both sides.
+TEST(SurfaceNccTest, CpuPassEqualsTheOperationsOnImagesSmallerThanTheWindow) {
+  const Inputs in = MakeInputs(/*radius=*/4, /*h=*/5, /*w=*/7);
+  const SurfaceCorrelation fast = CorrelateAlongSurface(in.source, in.reference, in.reference_mean,
+                                                        in.reference_var, in.a, in.b, in.surface, 4, 0);
+  const SurfaceCorrelation ops = CorrelateAlongSurfaceByOps(in.source, in.reference, in.reference_mean,
+                                                            in.reference_var, in.a, in.b, in.surface, 4, 0);
+  EXPECT_LE((fast.ok != ops.ok).sum().item<int64_t>(), 1);
+  EXPECT_GT(ops.ok.sum().item<int64_t>(), 0);
+  const torch::Tensor both = fast.ok & ops.ok;
+  EXPECT_LT((fast.ncc - ops.ncc).abs().masked_select(both).max().item<float>(), 2e-4);
 }
 
 TEST(SurfaceNccTest, RefusesMismatchedShapes) {
