@@ -5,11 +5,12 @@
 // on a surface.
 //
 // Every hypothesis of the search and every propagated candidate is one such
-// call, so it is most of the refinement's time. On CPU float tensors one
-// pass per source projects, samples (bilinearly) and forms the window
-// products, the running sums of WindowMean follow, and one pass more forms
-// the NCC, instead of some twenty LibTorch operations that each write a
-// full-size tensor. Other devices and types run those operations (the same
+// call, so it is most of the refinement's time. On CPU float tensors each
+// source is one streaming pass: rows are projected and sampled
+// (bilinearly) into a ring as the window reaches them, the window's column
+// sums move down with it, and only the NCC and its flags are written,
+// instead of some twenty LibTorch operations that each write a full-size
+// tensor. Other devices and types run those operations (the same
 // arithmetic; surface_ncc_test.cc checks the two against each other).
 
 #include <cstdint>
