@@ -205,45 +205,33 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   };
   const torch::Tensor textured = torch::sqrt(reference_var) >= options.min_texture;
 
-  // The search of +-steps hypotheses around `center` (inverse depth,
-  // [B,1,H,W]); `at_center`, when defined, is the score there already known.
-  // Returns the new inverse depth where the answer is clear, `center`
-  // elsewhere, with the score and where it was accepted.
-  struct Searched {
-    torch::Tensor w, best, accepted;
-  };
-  const auto search = [&](const torch::Tensor& center, int64_t steps, const torch::Tensor& at_center) {
-    std::vector<torch::Tensor> scores;
-    for (int64_t k = -steps; k <= steps; ++k) {
-      if (k == 0 && at_center.defined()) {
-        scores.push_back(at_center);
-      } else {
-        const auto [ncc, ok] = correlate(torch::add(center, dw, static_cast<double>(k)));
-        scores.push_back(score(ncc, ok));
-      }
+  std::vector<torch::Tensor> scores;
+  for (int64_t k = -options.steps; k <= options.steps; ++k) {
+    if (k == 0) {
+      scores.push_back(score(ncc_at_start, ok_at_start));
+    } else {
+      const auto [ncc, ok] = correlate(torch::add(w0, dw, static_cast<double>(k)));
+      scores.push_back(score(ncc, ok));
     }
-    const torch::Tensor volume = torch::cat(scores, 1);  // [B,2K+1,H,W]
-    const auto [best, best_index] = volume.max(1, /*keepdim=*/true);
-    const int64_t last = 2 * steps;
-    const torch::Tensor before = volume.gather(1, torch::clamp_min(best_index - 1, 0));
-    const torch::Tensor after = volume.gather(1, torch::clamp_max(best_index + 1, last));
-    // Parabola through the best score and its neighbours: its vertex.
-    const torch::Tensor curvature = before - 2 * best + after;
-    const torch::Tensor offset =
-        torch::where(curvature < -1e-6, torch::clamp(0.5 * (before - after) / curvature, -0.5, 0.5),
-                     torch::zeros_like(curvature));
-    const torch::Tensor w_new =
-        center + (best_index.to(opts.dtype()) - static_cast<double>(steps) + offset) * dw;
-    const torch::Tensor accepted = searchable & textured & (center > 0) & (best_index > 0) &
-                                   (best_index < last) & (best >= options.min_ncc) & (before > -1) &
-                                   (after > -1) & (w_new > 0);
-    return Searched{torch::where(accepted, w_new, center), torch::where(accepted, best, volume.narrow(1, steps, 1)),
-                    accepted};
-  };
-  const Searched first = search(w0, options.steps, score(ncc_at_start, ok_at_start));
-  torch::Tensor w_out = first.w;
-  torch::Tensor changed = first.accepted;
-  torch::Tensor best_out = first.best;
+  }
+  const torch::Tensor volume = torch::cat(scores, 1);  // [B,2K+1,H,W]
+  const auto [best, best_index] = volume.max(1, /*keepdim=*/true);
+  const int64_t last = 2 * options.steps;
+  const torch::Tensor before = volume.gather(1, torch::clamp_min(best_index - 1, 0));
+  const torch::Tensor after = volume.gather(1, torch::clamp_max(best_index + 1, last));
+  // Parabola through the best score and its neighbours: its vertex.
+  const torch::Tensor curvature = before - 2 * best + after;
+  const torch::Tensor offset =
+      torch::where(curvature < -1e-6, torch::clamp(0.5 * (before - after) / curvature, -0.5, 0.5),
+                   torch::zeros_like(curvature));
+  const torch::Tensor w_new =
+      w0 + (best_index.to(opts.dtype()) - static_cast<double>(options.steps) + offset) * dw;
+  const torch::Tensor refined = searchable & textured & (best_index > 0) & (best_index < last) &
+                                (best >= options.min_ncc) & (before > -1) & (after > -1) & (w_new > 0);
+
+  torch::Tensor w_out = torch::where(refined, w_new, w0);
+  torch::Tensor changed = refined;
+  torch::Tensor best_out = best;
   if (options.propagation_rounds > 0) {
     // Propagation: every pixel tries the planes of pixels far away in four
     // directions, on the sources chosen above, and keeps the best-scoring

@@ -182,14 +182,11 @@ SurfaceCorrelation CorrelateAlongSurfaceCpu(const torch::Tensor& source, const t
   return result;
 }
 
-}  // namespace
-
-SurfaceCorrelation CorrelateAlongSurfaceByOps(const torch::Tensor& source, const torch::Tensor& reference,
-                                              const torch::Tensor& reference_mean,
-                                              const torch::Tensor& reference_var, const torch::Tensor& a,
-                                              const torch::Tensor& b, const torch::Tensor& surface,
-                                              int64_t radius, double margin) {
-  CheckShapes(source, reference, reference_mean, reference_var, a, b, surface);
+// CorrelateAlongSurfaceByOps on checked shapes.
+SurfaceCorrelation CorrelateByOps(const torch::Tensor& source, const torch::Tensor& reference,
+                                  const torch::Tensor& reference_mean, const torch::Tensor& reference_var,
+                                  const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& surface,
+                                  int64_t radius, double margin) {
   const int64_t n = source.size(0) / surface.size(0);
   const int64_t h = source.size(2), w = source.size(3);
   const torch::Tensor per_source = surface.repeat_interleave(n, 0);
@@ -219,6 +216,17 @@ SurfaceCorrelation CorrelateAlongSurfaceByOps(const torch::Tensor& source, const
   return result;
 }
 
+}  // namespace
+
+SurfaceCorrelation CorrelateAlongSurfaceByOps(const torch::Tensor& source, const torch::Tensor& reference,
+                                              const torch::Tensor& reference_mean,
+                                              const torch::Tensor& reference_var, const torch::Tensor& a,
+                                              const torch::Tensor& b, const torch::Tensor& surface,
+                                              int64_t radius, double margin) {
+  CheckShapes(source, reference, reference_mean, reference_var, a, b, surface);
+  return CorrelateByOps(source, reference, reference_mean, reference_var, a, b, surface, radius, margin);
+}
+
 SurfaceCorrelation CorrelateAlongSurface(const torch::Tensor& source, const torch::Tensor& reference,
                                          const torch::Tensor& reference_mean,
                                          const torch::Tensor& reference_var, const torch::Tensor& a,
@@ -233,8 +241,7 @@ SurfaceCorrelation CorrelateAlongSurface(const torch::Tensor& source, const torc
     return CorrelateAlongSurfaceCpu(source, reference, reference_mean, reference_var, a, b, surface, radius,
                                     margin);
   }
-  return CorrelateAlongSurfaceByOps(source, reference, reference_mean, reference_var, a, b, surface, radius,
-                                    margin);
+  return CorrelateByOps(source, reference, reference_mean, reference_var, a, b, surface, radius, margin);
 }
 
 }  // namespace dispmvs::model
