@@ -64,6 +64,10 @@ options (default):
                               in-run validation is fp32 (fp32)
   --height H --width W        image size (128, 160)
   --sources N                 source views per sample (4)
+  --source_counts LIST        training: each step trains with one of these source counts (drawn
+                              uniformly, a random subset of the sample's --sources), e.g. 1,2,5,5
+                              mixes two-view and three-view samples into five-source training
+                              (all --sources)
   --batch B                   samples per step (1)
   --steps S                   total steps (1000)
   --lr LR                     Adam learning rate (2e-4)
@@ -192,6 +196,19 @@ std::vector<double> ParseWidenings(const std::string& flag, const std::string& v
   return out;
 }
 
+// "1,2,5": integers, comma-separated.
+std::vector<int64_t> ParseCounts(const std::string& flag, const std::string& value) {
+  std::vector<int64_t> out;
+  size_t begin = 0;
+  while (begin <= value.size()) {
+    const size_t comma = value.find(',', begin);
+    out.push_back(ParseInt(flag, value.substr(begin, comma == std::string::npos ? std::string::npos : comma - begin)));
+    if (comma == std::string::npos) break;
+    begin = comma + 1;
+  }
+  return out;
+}
+
 struct CommandLine {
   std::vector<double> widenings{1, 2, 3};
   std::vector<double> breakdown;  // one widening: --evaluate prints the error breakdown
@@ -218,6 +235,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--height") o.height = ParseInt(flag, value);
     else if (flag == "--width") o.width = ParseInt(flag, value);
     else if (flag == "--sources") o.num_sources = ParseInt(flag, value);
+    else if (flag == "--source_counts") o.source_counts = ParseCounts(flag, value);
     else if (flag == "--batch") o.batch_size = ParseInt(flag, value);
     else if (flag == "--steps") o.steps = ParseInt(flag, value);
     else if (flag == "--lr") o.lr = ParseDouble(flag, value);

@@ -96,6 +96,13 @@ std::string InitWeightsSetting(const std::string& path) {
 
 // The photo folder as a run setting: its absolute path, and a hash of the
 // names and sizes of its files (sorted), so that a changed folder is noticed.
+// "1,2,5" (empty: every step used all sources).
+std::string JoinCounts(const std::vector<int64_t>& counts) {
+  std::string text;
+  for (const int64_t count : counts) text += (text.empty() ? "" : ",") + std::to_string(count);
+  return text;
+}
+
 std::string TextureDirSetting(const std::string& dir) {
   if (dir.empty()) return "";
   std::vector<std::pair<std::string, uintmax_t>> files;
@@ -130,6 +137,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "difficulty_start") return std::to_string(1.0);
   if (key == "difficulty_ramp_steps") return "0";
   if (key == "lr_warmup_steps") return "0";
+  if (key == "source_counts") return "";
   return std::nullopt;
 }
 
@@ -223,7 +231,8 @@ Settings RunSettings(const TrainOptions& o) {
           {"scene_reuse", std::to_string(o.scene_reuse)},
           {"train_coarse_iterations", std::to_string(o.train_coarse_iterations)},
           {"difficulty_start", std::to_string(o.difficulty_start)},
-          {"difficulty_ramp_steps", std::to_string(o.difficulty_ramp_steps)}};
+          {"difficulty_ramp_steps", std::to_string(o.difficulty_ramp_steps)},
+          {"source_counts", JoinCounts(o.source_counts)}};
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,

@@ -111,6 +111,12 @@ void TrainOptions::Check(bool for_training) const {
   if (!texture_dir.empty() && !fs::is_directory(texture_dir)) {
     fail("texture_dir: no such folder " + texture_dir);
   }
+  for (const int64_t count : source_counts) {
+    if (count < 1 || count > num_sources) {
+      fail("each of source_counts must be in [1, num_sources = " + std::to_string(num_sources) + "], got " +
+           std::to_string(count));
+    }
+  }
   if (!(photo_probability >= 0 && photo_probability <= 1)) {
     fail("photo_probability must be in [0, 1], got " + std::to_string(photo_probability));
   }
@@ -188,6 +194,12 @@ double LearningRateAt(const TrainOptions& options, int64_t step) {
 
 uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index) {
   return Mix(Mix(seed, static_cast<uint64_t>(step)), static_cast<uint64_t>(index)) | kTopBit;
+}
+
+int64_t TrainingSourceCountAt(const TrainOptions& options, int64_t step) {
+  if (options.source_counts.empty()) return options.num_sources;
+  const uint64_t bits = Mix(Mix(options.seed, 0x50C7u), static_cast<uint64_t>(step));
+  return options.source_counts[bits % options.source_counts.size()];
 }
 
 double TrainingWideningAt(const TrainOptions& options, int64_t step) {

@@ -98,6 +98,13 @@ struct TrainOptions {
   // another of its views as the reference (the others its sources): the
   // ray-casting is paid once for R samples. 1 = a new scene every step.
   int64_t scene_reuse = 1;
+  // Source views per step: each step draws one count from this list
+  // (uniformly, from the seed and the step) and trains on that many of the
+  // sample's num_sources sources, a random subset. Two-view workspaces and
+  // references at the end of a sequence are common in practice; a network
+  // trained only with num_sources sources rarely sees one. Empty = every
+  // step uses all num_sources. Each count in [1, num_sources].
+  std::vector<int64_t> source_counts;
   // GRU iterations of the coarse stage in training steps (0 = the config's):
   // cheaper steps; validation and the saved weights keep the config's.
   int64_t train_coarse_iterations = 0;
@@ -172,6 +179,9 @@ uint64_t TrainingSampleSeed(uint64_t seed, int64_t step, int64_t index);
 // The depth-range widening x of training step `step`: log-uniform in
 // [1, options.train_widening_max], a function of (seed, step) alone.
 double TrainingWideningAt(const TrainOptions& options, int64_t step);
+
+// The number of sources training step `step` uses (TrainOptions::source_counts).
+int64_t TrainingSourceCountAt(const TrainOptions& options, int64_t step);
 
 // The difficulty of the generated scenes of training step `step`.
 double TrainingDifficultyAt(const TrainOptions& options, int64_t step);

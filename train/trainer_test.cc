@@ -15,6 +15,7 @@
 #include "tests/support/temp_dir.h"
 #include "train/error_breakdown.h"
 #include "train/step_log_test_util.h"
+#include "train/training_samples.h"
 
 namespace dispmvs::train {
 namespace {
@@ -295,6 +296,72 @@ TEST(TrainerV2Test, LogDepthAndFlowLossesTrainAndAreRunSettings) {
   EXPECT_THROW(Train(o, again), std::runtime_error);
 }
 
+TEST(TrainerV2Test, SourceCountsDrawFewerSourcesAsASubsetAndAreARunSetting) {
+  TempDir tmp;
+  TrainOptions o = TinyV2Options(tmp.path() / "counts", 2);
+  o.num_sources = 3;
+  EXPECT_EQ(TrainingSourceCountAt(o, 5), 3);  // off by default: every step all sources
+  o.source_counts = {1, 3};
+  std::map<int64_t, int> drawn;
+  for (int64_t step = 0; step < 400; ++step) {
+    const int64_t count = TrainingSourceCountAt(o, step);
+    ASSERT_EQ(count, TrainingSourceCountAt(o, step));
+    ++drawn[count];
+  }
+  ASSERT_EQ(drawn.size(), 2u);
+  EXPECT_NEAR(drawn[1], 200, 50);  // uniform over the list (binomial sd 10)
+
+  // A step with fewer sources keeps the reference and a subset of the same
+  // scene's sources, in their order.
+  fs::create_directories(o.checkpoint_dir);
+  std::ostringstream console;
+  internal::Logger log(console, tmp.path() / "log.txt");
+  TrainOptions all = o;
+  all.source_counts.clear();
+  internal::TrainingSamples with_all(all, torch::kCPU, log);
+  internal::TrainingSamples with_counts(o, torch::kCPU, log);
+  int steps_with_one = 0;
+  for (int64_t step = 0; step < 8; ++step) {
+    const auto full = with_all.ForStep(step);
+    const auto fewer = with_counts.ForStep(step);
+    ASSERT_EQ(full.size(), fewer.size());
+    const int64_t count = TrainingSourceCountAt(o, step);
+    steps_with_one += count == 1;
+    for (size_t i = 0; i < full.size(); ++i) {
+      ASSERT_EQ(full[i].images.size(0), 4);
+      ASSERT_EQ(fewer[i].images.size(0), count + 1);
+      EXPECT_TRUE(torch::equal(fewer[i].images[0], full[i].images[0]));
+      EXPECT_TRUE(torch::equal(fewer[i].depths[0], full[i].depths[0]));
+      EXPECT_EQ(fewer[i].depth_min, full[i].depth_min);
+      int64_t previous = 0;
+      for (int64_t v = 1; v <= count; ++v) {
+        int64_t match = 0;
+        for (int64_t u = 1; u < 4; ++u) {
+          if (torch::equal(fewer[i].world_to_camera[v], full[i].world_to_camera[u]) &&
+              torch::equal(fewer[i].images[v], full[i].images[u]) &&
+              torch::equal(fewer[i].intrinsics[v], full[i].intrinsics[u])) {
+            match = u;
+          }
+        }
+        EXPECT_GT(match, previous) << "step " << step << " view " << v;
+        previous = match;
+      }
+    }
+  }
+  EXPECT_GT(steps_with_one, 0);
+  EXPECT_LT(steps_with_one, 8);
+
+  // It trains, and resuming with another list is refused.
+  std::ostringstream train_log;
+  Train(o, train_log);
+  EXPECT_NE(train_log.str().find("step 2/2  loss "), std::string::npos) << train_log.str();
+  EXPECT_EQ(train_log.str().find("nan"), std::string::npos) << train_log.str();
+  o.steps = 3;
+  o.source_counts = {2, 3};
+  std::ostringstream again;
+  EXPECT_THROW(Train(o, again), std::runtime_error);
+}
+
 TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnce) {
   TempDir tmp;
   std::ostringstream log;
@@ -498,6 +565,11 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o = good;
   o.train_widening_max = 0.5;
   ExpectRejected(o, "train_widening_max");
+  o = good;
+  o.source_counts = {1, 3};  // more than num_sources = 2
+  ExpectRejected(o, "source_counts");
+  o.source_counts = {0};
+  ExpectRejected(o, "source_counts");
   o = good;
   o.depth_loss = "l2";
   ExpectRejected(o, "depth_loss");

@@ -1,5 +1,6 @@
 #include "train/training_samples.h"
 
+#include <algorithm>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
@@ -17,16 +18,9 @@ namespace {
 // sequence, so the replacement is deterministic too.
 constexpr int kMaxDrawAttempts = 16;
 
-// The sample with view `reference` as its reference and the other views, in
-// their order, as sources; the depth-range hint recomputed for it. Returns
-// the sample unchanged for reference 0, or when that view sees no surface.
-synth::SynthSample WithReference(const synth::SynthSample& sample, int64_t reference) {
-  const int64_t views = sample.images.size(0);
-  if (reference % views == 0) return sample;
-  std::vector<int64_t> order{reference % views};
-  for (int64_t v = 0; v < views; ++v) {
-    if (v != reference % views) order.push_back(v);
-  }
+// The sample with the views `order` (the first is the reference), in that
+// order; the depth-range hint recomputed for the reference.
+synth::SynthSample WithViews(const synth::SynthSample& sample, const std::vector<int64_t>& order) {
   const torch::Tensor index = torch::tensor(order, torch::kLong).to(sample.images.device());
   synth::SynthSample out = sample;
   out.images = sample.images.index_select(0, index);
@@ -34,8 +28,41 @@ synth::SynthSample WithReference(const synth::SynthSample& sample, int64_t refer
   out.world_to_camera = sample.world_to_camera.index_select(0, index);
   out.depths = sample.depths.index_select(0, index);
   std::tie(out.depth_min, out.depth_max) = synth::RobustDepthRange(out.depths[0]);
+  return out;
+}
+
+// The sample with view `reference` as its reference and the other views, in
+// their order, as sources. Returns the sample unchanged for reference 0, or
+// when that view sees no surface.
+synth::SynthSample WithReference(const synth::SynthSample& sample, int64_t reference) {
+  const int64_t views = sample.images.size(0);
+  if (reference % views == 0) return sample;
+  std::vector<int64_t> order{reference % views};
+  for (int64_t v = 0; v < views; ++v) {
+    if (v != reference % views) order.push_back(v);
+  }
+  synth::SynthSample out = WithViews(sample, order);
   if (!(out.depth_min > 0 && out.depth_min < out.depth_max)) return sample;
   return out;
+}
+
+// The sample with `count` of its sources, drawn without replacement by
+// `seed` and kept in their order (the reference, and so its range, stays).
+synth::SynthSample WithSourceCount(const synth::SynthSample& sample, int64_t count, uint64_t seed) {
+  const int64_t sources = sample.images.size(0) - 1;
+  if (count >= sources) return sample;
+  std::vector<int64_t> pool(static_cast<size_t>(sources));
+  for (int64_t s = 0; s < sources; ++s) pool[static_cast<size_t>(s)] = s + 1;
+  // Partial Fisher-Yates: the first `count` places hold the draw.
+  for (int64_t i = 0; i < count; ++i) {
+    const uint64_t r = synth::SplitMix64(seed + static_cast<uint64_t>(i));
+    const int64_t j = i + static_cast<int64_t>(r % static_cast<uint64_t>(sources - i));
+    std::swap(pool[static_cast<size_t>(i)], pool[static_cast<size_t>(j)]);
+  }
+  std::vector<int64_t> order(pool.begin(), pool.begin() + count);
+  std::sort(order.begin(), order.end());
+  order.insert(order.begin(), 0);
+  return WithViews(sample, order);
 }
 
 }  // namespace
@@ -134,9 +161,12 @@ std::vector<synth::SynthSample> TrainingSamples::ForStep(int64_t step) {
     }
     cached_group_ = group;
   }
+  const int64_t sources = TrainingSourceCountAt(options_, step);
+  const uint64_t subset_seed = Mix(TrainingSampleSeed(options_.seed, step, 0), 0x5eedu);
   std::vector<synth::SynthSample> samples;
   for (const auto& scene : cached_scenes_) {
-    samples.push_back(WithReference(scene, step % options_.scene_reuse));
+    samples.push_back(WithSourceCount(WithReference(scene, step % options_.scene_reuse), sources,
+                                      Mix(subset_seed, samples.size())));
   }
   return samples;
 }
