@@ -9,6 +9,7 @@
 #include <torch/torch.h>
 
 #include "dense/feature_cache.h"
+#include "model/confidence_model.h"
 #include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/host_allocator.h"
@@ -74,6 +75,9 @@ void EstimatorOptions::Check() const {
   }
   if (feature_cache_mb < 0) throw std::invalid_argument("--feature_cache_mb must be >= 0");
   model::ParseRefinementMode(refinement, "--refinement");
+  if (confidence != "model" && confidence != "network") {
+    throw std::invalid_argument("--confidence must be model or network, got '" + confidence + "'");
+  }
   try {
     refinement_options.Check();
   } catch (const std::invalid_argument& error) {
@@ -89,6 +93,7 @@ struct DepthEstimator::Impl {
   std::unique_ptr<FeatureCache> features;
   bool refine = false;
   model::PhotometricRefinementOptions refinement;
+  model::ConfidenceModel confidence_model;  // empty: the network's confidence
 };
 
 DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::make_unique<Impl>()) {
@@ -110,6 +115,7 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
     if (options.fine_iterations > 0) impl_->config.fine_iterations = options.fine_iterations;
     impl_->net = model::DispMvsNet(impl_->config);
     model::LoadModuleWeights(*impl_->net, options.model_path);
+    if (options.confidence == "model") impl_->confidence_model = model::ReadConfidenceModel(options.model_path);
   } catch (const std::exception& error) {
     throw std::runtime_error("cannot use the weights " + options.model_path + ": " + error.what());
   }
@@ -118,9 +124,13 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   impl_->net->set_precision(impl_->precision);
   impl_->refine = model::ParseRefinementMode(options.refinement, "--refinement");
   impl_->refinement = options.refinement_options;
+  // The model reads the refinement's correlation and texture.
+  if (!impl_->refine) impl_->confidence_model = {};
 }
 
 DepthEstimator::~DepthEstimator() = default;
+
+bool DepthEstimator::UsesConfidenceModel() const { return !impl_->confidence_model.empty(); }
 
 DepthEstimator::WeightsInfo DepthEstimator::CheckWeightsFile(const std::string& model_path) {
   try {
@@ -209,12 +219,18 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
   // start from the same random depths.
   const model::DispMvsOutput output =
       impl_->net->forward(input, at::make_generator<at::CPUGeneratorImpl>(seed));
-  const torch::Tensor depth =
-      impl_->refine ? model::RefineDepthPhotometrically(input, output, impl_->refinement).depth
-                    : output.depth;
+  torch::Tensor depth = output.depth;
+  torch::Tensor confidence = output.confidence;
+  if (impl_->refine) {
+    const model::PhotometricRefinement refined = model::RefineDepthPhotometrically(input, output, impl_->refinement);
+    depth = refined.depth;
+    if (UsesConfidenceModel()) {
+      confidence = model::ConfidenceMap(impl_->confidence_model, output.confidence, refined);
+    }
+  }
   DepthEstimate estimate;
   estimate.depth = ToDenseArray(depth[0][0]);
-  estimate.confidence = ToDenseArray(output.confidence[0][0] * output.valid[0][0]);
+  estimate.confidence = ToDenseArray(confidence[0][0] * output.valid[0][0]);
   return estimate;
 }
 

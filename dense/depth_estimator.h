@@ -42,6 +42,13 @@ struct EstimatorOptions {
   // (the paper's behaviour).
   std::string refinement = "ncc";
   model::PhotometricRefinementOptions refinement_options;
+  // The confidence map: "model", the weights' confidence model
+  // (model/confidence_model.h: the probability that the depth is within
+  // 2 %, from the network's confidence and the refinement's correlation and
+  // texture) where the weights carry one and the refinement runs, else the
+  // network's; or "network", the network's own (the softmax mass of its last
+  // match around the peak).
+  std::string confidence = "model";
 
   // Throws std::invalid_argument naming the command-line option at fault.
   void Check() const;
@@ -71,6 +78,9 @@ class DepthEstimator {
   // options or an unavailable device, std::runtime_error for weights that are
   // missing, malformed or do not match the network they describe.
   explicit DepthEstimator(const EstimatorOptions& options);
+  // Whether the confidence maps come from the weights' confidence model
+  // (EstimatorOptions::confidence), not the network's.
+  bool UsesConfidenceModel() const;
   ~DepthEstimator();
   DepthEstimator(const DepthEstimator&) = delete;
   DepthEstimator& operator=(const DepthEstimator&) = delete;

@@ -13,6 +13,7 @@
 #include <gtest/gtest.h>
 #include <torch/torch.h>
 
+#include "model/confidence_model.h"
 #include "model/config.h"
 #include "model/dispmvs_net.h"
 #include "model/safetensors.h"
@@ -148,6 +149,51 @@ TEST(DepthEstimatorTest, ReusedEncoderFeaturesGiveTheSameMaps) {
   EXPECT_EQ(uncached.encoder_use().reused, 0);
   none.feature_cache_mb = -1;
   EXPECT_THROW(none.Check(), std::invalid_argument);
+}
+
+// The confidence map comes from the weights' confidence model where they
+// carry one and the refinement runs; else, or with --confidence network,
+// it is the network's. The depth is the same either way.
+TEST(DepthEstimatorTest, ConfidenceModelOfTheWeightsGivesTheConfidenceMap) {
+  const testing::TempDir dir;
+  const std::string plain = WriteRandomWeights(model::ModelConfig::SmallV2(), dir);
+  const std::string with_model = (dir.path() / "with_model.safetensors").string();
+  // A model that reads the texture alone: sigmoid(0.5 + 0.1 * log texture),
+  // different from any network confidence.
+  model::ConfidenceModel confidence_model;
+  confidence_model.coefficients = {0.5, 0, 0, 0, 0, 0, 0.1, 0, 0};
+  model::WriteConfidenceModel(plain, with_model, confidence_model);
+
+  DepthEstimator network(OptionsFor(plain));
+  EXPECT_FALSE(network.UsesConfidenceModel());
+  DepthEstimator modelled(OptionsFor(with_model));
+  EXPECT_TRUE(modelled.UsesConfidenceModel());
+  EstimatorOptions asked_network = OptionsFor(with_model);
+  asked_network.confidence = "network";
+  EXPECT_FALSE(DepthEstimator(asked_network).UsesConfidenceModel());
+  EstimatorOptions unrefined = OptionsFor(with_model);
+  unrefined.refinement = "none";
+  EXPECT_FALSE(DepthEstimator(unrefined).UsesConfidenceModel());
+
+  const DepthEstimate a = network.Estimate(SmallProblem(), std::nullopt, 1);
+  const DepthEstimate b = modelled.Estimate(SmallProblem(), std::nullopt, 1);
+  ExpectUsableEstimate(b);
+  EXPECT_EQ(a.depth.values(), b.depth.values());
+  // The uniform-noise images are textured everywhere: every pixel with a
+  // depth has the model's value, in (sigmoid(0.5 + 0.1 log 0.01), sigmoid(0.5)).
+  int checked = 0;
+  for (std::size_t i = 0; i < b.depth.values().size(); ++i) {
+    if (b.depth.values()[i] <= 0) continue;
+    EXPECT_GT(b.confidence.values()[i], 1 / (1 + std::exp(-(0.5 + 0.1 * std::log(0.01)))));
+    EXPECT_LT(b.confidence.values()[i], 1 / (1 + std::exp(-0.5)));
+    ++checked;
+  }
+  EXPECT_GT(checked, kWidth * kHeight / 2);
+  EXPECT_NE(a.confidence.values(), b.confidence.values());
+
+  EstimatorOptions bad = OptionsFor(with_model);
+  bad.confidence = "peak";
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
 }  // namespace

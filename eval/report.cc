@@ -37,6 +37,25 @@ void AppendDisparityCells(const DisparityMetrics& m, Row* row) {
                            Percent(m.within_2px_of_gt)});
 }
 
+// The confidence maps' ranking, for the types that have them.
+void PrintConfidenceRanking(const WorkspaceEvalReport& report, std::ostream& out) {
+  std::vector<Row> rows;
+  rows.push_back({"type", "views", "pixels"});
+  for (const double coverage : kRankingCoverages) rows.back().push_back(Format("%g%%", 100 * coverage));
+  for (const TypeDepthResult& type : report.types) {
+    if (type.views_with_confidence == 0) continue;
+    rows.push_back({type.type, std::to_string(type.views_with_confidence) + "/" + std::to_string(type.views.size()),
+                    std::to_string(type.confidence_ranking.total())});
+    for (const double coverage : kRankingCoverages) {
+      rows.back().push_back(Percent(type.confidence_ranking.ShareWithin2AtCoverage(coverage)));
+    }
+  }
+  if (rows.size() == 1) return;
+  out << "\nconfidence ranking: of the predicted pixels with ground truth, the share within 2 % among "
+         "the most confident 50 / 75 / 90 / 100 % (falling = the confidence keeps the right pixels first)\n";
+  PrintTable(rows, out);
+}
+
 // ---- TSV ----
 
 // Exact and round-trippable: 17 significant digits, "nan" for NaN.
@@ -134,6 +153,7 @@ void PrintReport(const WorkspaceEvalReport& report, bool per_view, std::ostream&
   }
   PrintTable(rows, out);
   for (const std::string& note : notes) out << note << '\n';
+  PrintConfidenceRanking(report, out);
 
   if (!report.gt_cloud) return;
   const GtCloudInfo& gt = *report.gt_cloud;
@@ -186,6 +206,16 @@ std::string ReportToJson(const WorkspaceEvalReport& report) {
         .Add("views", JsonNumber(static_cast<int64_t>(type.views.size())))
         .Add("maps_without_gt", JsonNumber(type.maps_without_gt))
         .Add("disparity_views", JsonNumber(type.disparity_sums.views));
+    if (type.views_with_confidence > 0) {
+      JsonObject ranking(6);
+      ranking.Add("views", JsonNumber(static_cast<int64_t>(type.views_with_confidence)))
+          .Add("pixels", JsonNumber(type.confidence_ranking.total()));
+      for (const double coverage : kRankingCoverages) {
+        ranking.Add(Format("within_2_at_%g", 100 * coverage),
+                    JsonNumber(type.confidence_ranking.ShareWithin2AtCoverage(coverage)));
+      }
+      object.Add("confidence_ranking", ranking.str());
+    }
     if (type.evaluated()) {
       JsonObject overall(6);
       AddMetrics(type.overall, &overall);
@@ -281,6 +311,16 @@ std::string ReportToTsv(const WorkspaceEvalReport& report) {
            std::to_string(s.within_2) + "\t" + std::to_string(s.within_5) + "\t" +
            TsvNumber(s.abs_rel_sum) + "\t" + std::to_string(d.gt_pixels) + "\t" +
            std::to_string(d.within_1px) + "\t" + std::to_string(d.within_2px) + "\n";
+  }
+  out += "#confidence\ttype\tviews\tpixels\twithin_2_at_50\twithin_2_at_75\twithin_2_at_90\twithin_2_at_100\n";
+  for (const TypeDepthResult& type : report.types) {
+    if (type.views_with_confidence == 0) continue;
+    out += "confidence\t" + TsvField(type.type, "depth-map type") + "\t" +
+           std::to_string(type.views_with_confidence) + "\t" + std::to_string(type.confidence_ranking.total());
+    for (const double coverage : kRankingCoverages) {
+      out += "\t" + TsvNumber(type.confidence_ranking.ShareWithin2AtCoverage(coverage));
+    }
+    out += "\n";
   }
   out += "#cloud\tply\tpoints\tgt_points\taccuracy\tcompleteness\toverall\tprecision\trecall\t"
          "fscore\ttau\tcutoff\n";

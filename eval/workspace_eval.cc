@@ -277,6 +277,14 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
     view.disparity_geometry = disparity_geometry;
     view.disparity = Finalize(disparity_sums);
     report->types[t].views.push_back(std::move(view));
+    const fs::path confidence_path = workspace.ConfidenceMapPath(image.name, type);
+    if (IsFile(confidence_path)) {
+      const colmap_io::DenseArray confidence = ReadDepthMap(confidence_path, "confidence map");
+      if (confidence.width() == map.width() && confidence.height() == map.height() && confidence.channels() == 1) {
+        report->types[t].confidence_ranking += SumConfidenceRanking(map, confidence, gt);
+        ++report->types[t].views_with_confidence;
+      }
+    }
     (*sums)[t].depth += view_sums;
     (*sums)[t].disparity += disparity_sums;
   }

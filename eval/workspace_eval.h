@@ -25,6 +25,7 @@
 #include "colmap_io/sparse_model.h"
 #include "colmap_io/workspace.h"
 #include "eval/cloud_metrics.h"
+#include "eval/confidence_ranking.h"
 #include "eval/depth_metrics.h"
 #include "eval/rectified_pair.h"
 
@@ -86,6 +87,11 @@ struct TypeDepthResult {
   // The raw sums behind `overall` and `disparity_overall` (the TSV report).
   DepthMetricSums sums;
   DisparityMetricSums disparity_sums;
+  // The confidence maps' ranking of the predicted pixels
+  // (confidence_ranking.h), over the views that have one of the depth map's
+  // size; views_with_confidence of `views` had one.
+  ConfidenceRankingSums confidence_ranking;
+  int views_with_confidence = 0;
   bool evaluated() const { return !views.empty(); }
 };
 

@@ -232,6 +232,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   torch::Tensor w_out = torch::where(refined, w_new, w0);
   torch::Tensor changed = refined;
   torch::Tensor best_out = best;
+  torch::Tensor output_score = torch::where(refined, best, scores[static_cast<size_t>(options.steps)]);
   if (options.propagation_rounds > 0) {
     // Propagation: every pixel tries the planes of pixels far away in four
     // directions, on the sources chosen above, and keeps the best-scoring
@@ -268,6 +269,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
       }
     }
     best_out = torch::where(changed, current, best_out);
+    output_score = current;
   }
 
   PhotometricRefinement result;
@@ -276,6 +278,9 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   result.depth = torch::where(changed, 1.0 / torch::where(changed, w_out, torch::ones_like(w_out)),
                               torch::where(usable, depth_in, torch::zeros_like(depth_in)));
   result.score = torch::where(searchable, best_out, torch::full_like(best_out, -1.0));
+  result.output_score = torch::where(searchable, output_score, torch::full_like(output_score, -1.0));
+  result.texture = torch::sqrt(reference_var);
+  result.texture_support = WindowMean(textured.to(opts), kTextureSupportRadius);
   return result;
 }
 

@@ -62,7 +62,21 @@ struct PhotometricRefinement {
   torch::Tensor valid;    // [B,1,H,W] bool: the input's valid mask (refinement adds none)
   torch::Tensor refined;  // [B,1,H,W] bool: where the search or propagation replaced the depth
   torch::Tensor score;    // [B,1,H,W] the best NCC found, -1 where none was computed
+  // [B,1,H,W] the NCC at the output depth: the accepted score where the
+  // search or propagation replaced the depth, the network depth's own score
+  // elsewhere; -1 where none was computed. With `texture`, what the
+  // confidence model (model/confidence_model.h) reads.
+  torch::Tensor output_score;
+  torch::Tensor texture;  // [B,1,H,W] standard deviation of the reference window's grey values
+  // [B,1,H,W] the share of textured windows (texture >= min_texture) within
+  // kTextureSupportRadius pixels: 0 where nothing near a pixel holds any
+  // image evidence to match or to interpolate from (a flat wall's middle,
+  // an all-black view).
+  torch::Tensor texture_support;
 };
+
+// The radius of PhotometricRefinement::texture_support, full-resolution pixels.
+inline constexpr int64_t kTextureSupportRadius = 32;
 
 // depth, valid: [B,1,H,W] (the network's DispMvsOutput::depth and valid).
 // Throws std::invalid_argument on mismatched shapes or V < 2.

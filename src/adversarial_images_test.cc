@@ -1,7 +1,8 @@
 // dispmvs_colmap on images built to break a matcher: constant black,
 // constant white, pure noise, and a short repeated pattern (every match
 // ambiguous), through all three passes. Whatever the depth maps say, no
-// output may hold a NaN or an infinity, and the run must end normally.
+// output may hold a NaN or an infinity, and the run must end normally; and
+// the flat views (black, white) must fuse next to nothing.
 
 #include <cmath>
 #include <cstdint>
@@ -99,7 +100,14 @@ TEST_P(AdversarialImagesTest, NoNanOrInfInAnyOutput) {
     }
   }
   ExpectAllFinite(cloud, "fused.ply");
-  std::printf("%s: %zu fused points\n", GetParam().name.c_str(), cloud.size() / 6);
+  const std::size_t points = cloud.size() / 6;
+  std::printf("%s: %zu fused points\n", GetParam().name.c_str(), points);
+  // Views without any texture hold no evidence for a depth: their
+  // confidence is 0 (model/confidence_model.h), so the default
+  // --min_confidence fuses nothing from them. Before the confidence model
+  // they fused 1164 (black) and 1267 (white) points here; the bound is 1 %
+  // of those.
+  if (GetParam().name == "black" || GetParam().name == "white") EXPECT_LT(points, 12u);
 }
 
 void PrintTo(const AdversarialImages& kind, std::ostream* out) { *out << kind.name; }

@@ -343,6 +343,12 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
            ->default_value(o.photometric.estimator.refinement_options.propagation_slope_radius),
        "--refinement ncc: a propagated plane's slope is fitted to the depth over "
        "(2r+1) x (2r+1) pixels.")
+      ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
+           ->default_value(o.photometric.estimator.confidence),
+       "The confidence maps: model (the probability that a pixel's depth is within 2 %, "
+       "from the network's confidence and the refinement's correlation and texture, by the "
+       "confidence model the weights carry; where they carry none, or with --refinement none, "
+       "the network's) or network (the network's own: how peaked its last match was).")
       ("threads", po::value<int>(&o.photometric.estimator.threads)->default_value(0),
        "CPU threads for the network; 0 = one per core.")
       ("seed", po::value<uint64_t>(&o.photometric.seed)->default_value(0),
@@ -367,8 +373,12 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Left at the default, a reference with fewer sources that have depth maps (a stereo "
        "pair: 1 each) needs what it has, at least 1, with a warning; a value given here that "
        "no reference can meet stops the run before any work.")
-      ("min_confidence", po::value<double>(&o.filter.min_confidence)->default_value(0),
-       "Drop pixels whose network confidence (in [0, 1]) is lower.")
+      ("min_confidence", po::value<double>(&o.filter.min_confidence)->default_value(0.1, "0.1"),
+       "Geometric filter and fusion: drop pixels (reference and source) whose confidence is "
+       "lower. With the default --confidence model it is the estimated probability that the "
+       "depth is within 2 %, and 0 where no texture lies within 32 pixels: 0.1 drops what the "
+       "images give no evidence for (all-black or all-white views fuse nothing) and little "
+       "else. 0 keeps every pixel, as before.")
       ("mask_path", po::value<std::string>(&o.mask_path),
        "Folder of masks, COLMAP's: MASK/NAME.png for image NAME (or MASK/NAME when NAME ends "
        "in .png), resampled to the maps' size; black pixels (red channel 0) are ignored by the "

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "src/program_main.h"
+#include "train/confidence_fit.h"
 #include "train/error_breakdown.h"
 #include "train/source_pixel_metrics.h"
 #include "train/trainer.h"
@@ -35,7 +36,19 @@ constexpr const char* kUsage = R"(usage:
                                                  can reach; and the error in those sources' pixels
                                                  (<1 / 2 px) beside how far 2 % of depth moves a match
 
+  dispmvs_train --fit_confidence WEIGHTS --output OUT [options]
+                                                 fit the confidence model (the probability that a
+                                                 pixel's depth is within 2 %, from the network's
+                                                 confidence and the photometric refinement's
+                                                 correlation and texture; model/confidence_model.h)
+                                                 on --fit_scenes generated scenes (training seeds,
+                                                 the --source_counts mix), rank it against the
+                                                 network's confidence on the validation scenes, and
+                                                 write WEIGHTS with it to OUT (dispmvs_colmap then
+                                                 writes it as the confidence map)
+
 options (default):
+  --fit_scenes M              --fit_confidence only: scenes to fit on (40)
   --config NAME               network (small): paper | small (the paper's design: random start inside
                               the depth-range hint) or paper_v2 | small_v2 (model v2: range-free start
                               from the best match along each epipolar segment, matching loss);
@@ -214,6 +227,9 @@ struct CommandLine {
   std::vector<double> breakdown;  // one widening: --evaluate prints the error breakdown
   TrainOptions options;
   std::string evaluate_weights;  // empty: train
+  std::string fit_confidence_weights;  // non-empty: fit the confidence model to these weights
+  std::string output;                  // ... and write them with it here
+  int64_t fit_scenes = 40;
   bool help = false;
 };
 
@@ -231,6 +247,9 @@ CommandLine Parse(int argc, char** argv) {
     const std::string value = argv[++i];
     if (flag == "--checkpoint_dir") o.checkpoint_dir = value;
     else if (flag == "--evaluate") cl.evaluate_weights = value;
+    else if (flag == "--fit_confidence") cl.fit_confidence_weights = value;
+    else if (flag == "--output") cl.output = value;
+    else if (flag == "--fit_scenes") cl.fit_scenes = ParseInt(flag, value);
     else if (flag == "--config") o.config = value;
     else if (flag == "--height") o.height = ParseInt(flag, value);
     else if (flag == "--width") o.width = ParseInt(flag, value);
@@ -283,11 +302,21 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--val_seed_base") o.validation_seed_base = ParseUnsigned(flag, value);
     else throw std::invalid_argument("unknown option " + flag + " (see --help)");
   }
-  if (cl.evaluate_weights.empty() && o.checkpoint_dir.empty()) {
-    throw std::invalid_argument("give --checkpoint_dir DIR (train) or --evaluate WEIGHTS (see --help)");
+  const int modes = !cl.evaluate_weights.empty() + !o.checkpoint_dir.empty() + !cl.fit_confidence_weights.empty();
+  if (modes == 0) {
+    throw std::invalid_argument(
+        "give --checkpoint_dir DIR (train), --evaluate WEIGHTS or --fit_confidence WEIGHTS (see --help)");
   }
-  if (!cl.evaluate_weights.empty() && !o.checkpoint_dir.empty()) {
-    throw std::invalid_argument("--evaluate and --checkpoint_dir exclude each other");
+  if (modes > 1) {
+    throw std::invalid_argument("--checkpoint_dir, --evaluate and --fit_confidence exclude each other");
+  }
+  if (!cl.fit_confidence_weights.empty()) {
+    if (cl.output.empty()) throw std::invalid_argument("--fit_confidence needs --output FILE");
+    if (cl.fit_scenes < 1) throw std::invalid_argument("--fit_scenes must be >= 1");
+    // The model reads the refinement: it is on unless asked otherwise.
+    if (o.eval_refinement == "none") o.eval_refinement = "ncc";
+  } else if (!cl.output.empty()) {
+    throw std::invalid_argument("--output goes with --fit_confidence WEIGHTS");
   }
   if (!cl.breakdown.empty() && cl.evaluate_weights.empty()) {
     throw std::invalid_argument("--breakdown goes with --evaluate WEIGHTS");
@@ -320,6 +349,22 @@ void PrintEvaluation(const CommandLine& cl) {
   }
 }
 
+void FitAndWriteConfidence(const CommandLine& cl) {
+  const auto& o = cl.options;
+  std::cout << "weights " << cl.fit_confidence_weights << ": fitting the confidence model on " << cl.fit_scenes
+            << " generated scenes (training seeds from " << o.seed << "), " << o.width << "x" << o.height
+            << ", N = " << o.num_sources << " (source counts drawn from --source_counts), then ranking on "
+            << o.num_validation_scenes << " validation scenes" << std::endl;
+  const auto fit = dispmvs::train::FitConfidence(cl.fit_confidence_weights, o, cl.fit_scenes, std::cout);
+  std::printf("fit: %lld pixels of %lld scenes, %.4f within 2 %%\n", static_cast<long long>(fit.fit_pixels),
+              static_cast<long long>(fit.fit_scenes), fit.fit_share_correct);
+  std::printf("coefficients (%s): %s\n", dispmvs::model::kConfidenceModelKey, fit.model.ToText().c_str());
+  std::printf("%s\n%s\n", dispmvs::train::FormatConfidenceCurves("fit scenes", fit.fit).c_str(),
+              dispmvs::train::FormatConfidenceCurves("validation scenes", fit.validation).c_str());
+  dispmvs::model::WriteConfidenceModel(cl.fit_confidence_weights, cl.output, fit.model);
+  std::cout << "wrote " << cl.output << std::endl;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -329,7 +374,9 @@ int main(int argc, char** argv) {
       std::cout << kUsage;
       return 0;
     }
-    if (!cl.evaluate_weights.empty()) {
+    if (!cl.fit_confidence_weights.empty()) {
+      FitAndWriteConfidence(cl);
+    } else if (!cl.evaluate_weights.empty()) {
       PrintEvaluation(cl);
     } else {
       dispmvs::train::Train(cl.options, std::cout);

@@ -20,6 +20,7 @@
 #include "synth/generator.h"
 #include "train/batch.h"
 #include "train/checkpoint.h"
+#include "train/confidence_fit.h"
 #include "train/error_breakdown.h"
 #include "train/train_log.h"
 #include "train/training_samples.h"
@@ -458,6 +459,14 @@ std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, con
                                             const std::vector<double>& widenings) {
   auto [net, scenes] = LoadForEvaluation(weights_path, options);
   return Validate(net, scenes, options, widenings, /*look_from_sources=*/true);
+}
+
+ConfidenceFit FitConfidence(const std::string& weights_path, const TrainOptions& options,
+                            int64_t fit_scene_count, std::ostream& log) {
+  if (fit_scene_count < 1) throw std::invalid_argument("the confidence fit needs at least one scene");
+  auto [net, validation_scenes] = LoadForEvaluation(weights_path, options);
+  const auto fit_scenes = ConfidenceFitScenes(options, fit_scene_count, model::ParseUsableDevice(options.device));
+  return FitConfidenceOnScenes(net, fit_scenes, validation_scenes, options, log);
 }
 
 ErrorBreakdown EvaluateErrorBreakdown(const std::string& weights_path, const TrainOptions& options,

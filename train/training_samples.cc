@@ -46,8 +46,10 @@ synth::SynthSample WithReference(const synth::SynthSample& sample, int64_t refer
   return out;
 }
 
-// The sample with `count` of its sources, drawn without replacement by
-// `seed` and kept in their order (the reference, and so its range, stays).
+}  // namespace
+
+uint64_t Mix(uint64_t a, uint64_t b) { return synth::SplitMix64(a ^ synth::SplitMix64(b)); }
+
 synth::SynthSample WithSourceCount(const synth::SynthSample& sample, int64_t count, uint64_t seed) {
   const int64_t sources = sample.images.size(0) - 1;
   if (count >= sources) return sample;
@@ -65,9 +67,6 @@ synth::SynthSample WithSourceCount(const synth::SynthSample& sample, int64_t cou
   return WithViews(sample, order);
 }
 
-}  // namespace
-
-uint64_t Mix(uint64_t a, uint64_t b) { return synth::SplitMix64(a ^ synth::SplitMix64(b)); }
 
 synth::SynthConfig SynthConfigFor(const TrainOptions& options) {
   synth::SynthConfig config;

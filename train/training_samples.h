@@ -27,6 +27,11 @@ inline constexpr uint64_t kTopBit = uint64_t{1} << 63;
 // Two seeds into one (SplitMix64: the same on every platform).
 uint64_t Mix(uint64_t a, uint64_t b);
 
+// The sample with `count` of its sources (all when count >= their number),
+// drawn without replacement by `seed` and kept in their order; the
+// reference, and so its depth range, stays.
+synth::SynthSample WithSourceCount(const synth::SynthSample& sample, int64_t count, uint64_t seed);
+
 // The generator's configuration for the size and view count of `options` (checked).
 synth::SynthConfig SynthConfigFor(const TrainOptions& options);
 
