@@ -161,7 +161,7 @@ TEST(DepthEstimatorTest, ConfidenceModelOfTheWeightsGivesTheConfidenceMap) {
   // A model that reads the texture alone: sigmoid(0.5 + 0.1 * log texture),
   // different from any network confidence.
   model::ConfidenceModel confidence_model;
-  confidence_model.coefficients = {0.5, 0, 0, 0, 0, 0, 0.1, 0, 0};
+  confidence_model.coefficients = {0.5, 0, 0, 0, 0, 0, 0.1, 0};
   model::WriteConfidenceModel(plain, with_model, confidence_model);
 
   DepthEstimator network(OptionsFor(plain));

@@ -17,15 +17,14 @@ torch::Tensor ConfidenceFeatures(const torch::Tensor& network_confidence, const 
   const torch::Tensor gap = torch::clamp_min(refinement.score.to(opts) - score, 0) * computed;
   return torch::cat({torch::ones_like(score), network_confidence.to(opts), output_ncc, computed, gap,
                      refinement.refined.to(opts), torch::log(torch::clamp_min(refinement.texture.to(opts), 1e-3)),
-                     output_ncc * output_ncc, refinement.texture_support.to(opts)},
+                     output_ncc * output_ncc},
                     1);
 }
 
 torch::Tensor ConfidenceMap(const ConfidenceModel& model, const torch::Tensor& network_confidence,
                             const PhotometricRefinement& refinement) {
-  const torch::Tensor features = ConfidenceFeatures(network_confidence, refinement);
-  const torch::Tensor predicted = PredictConfidence(model, features);
-  return torch::where(features.narrow(1, 8, 1) > 0, predicted, torch::zeros_like(predicted));
+  const torch::Tensor predicted = PredictConfidence(model, ConfidenceFeatures(network_confidence, refinement));
+  return torch::where(refinement.signal_support.to(predicted.device()) > 0, predicted, torch::zeros_like(predicted));
 }
 
 std::string ConfidenceModel::ToText() const {

@@ -38,8 +38,7 @@ namespace dispmvs::model {
 //   5  1 where the refinement replaced the network's depth
 //   6  log of the reference window's grey standard deviation (floored at 1e-3)
 //   7  the output NCC squared (the step from "uncertain" to "sure" is not linear)
-//   8  the share of textured windows nearby (PhotometricRefinement::texture_support)
-inline constexpr int64_t kConfidenceFeatures = 9;
+inline constexpr int64_t kConfidenceFeatures = 8;
 torch::Tensor ConfidenceFeatures(const torch::Tensor& network_confidence, const PhotometricRefinement& refinement);
 
 // The logistic model's coefficients, one per feature; empty = no model.
@@ -61,11 +60,13 @@ inline constexpr char kConfidenceModelKey[] = "confidence_model";
 torch::Tensor PredictConfidence(const ConfidenceModel& model, const torch::Tensor& features);
 
 // The confidence map of a refined depth map: PredictConfidence, and 0 where
-// no textured window lies within kTextureSupportRadius pixels (feature 8 is
-// 0). There the images say nothing: the depth comes from the network's
-// context alone, and on a view that is flat everywhere (all black, all
-// white, fog) from nothing at all; a fitted model cannot learn that from
-// generated scenes, which always have texture nearby.
+// no window within kSignalRadius pixels has any image signal
+// (PhotometricRefinement::signal_support is 0). There the depth comes from
+// nothing the images show: an all-black or all-white view, a clipped sky. A
+// fitted model cannot learn that from generated scenes, whose sensor noise
+// gives every window some signal (their flat textures are still matched
+// through their edges and shading: about half of the pixels more than 32
+// pixels from any texture are within 2 % there).
 torch::Tensor ConfidenceMap(const ConfidenceModel& model, const torch::Tensor& network_confidence,
                             const PhotometricRefinement& refinement);
 

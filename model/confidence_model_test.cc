@@ -18,7 +18,7 @@ torch::Tensor RandomFeatures(int64_t m, uint64_t seed) {
 }
 
 TEST(ConfidenceModelTest, FitRecoversTheCoefficientsThatDrewTheLabels) {
-  const std::vector<double> truth{-0.5, 1.5, -2.0, 0.7, 0.0, 1.0, -0.3, 0.4, 0.9};
+  const std::vector<double> truth{-0.5, 1.5, -2.0, 0.7, 0.0, 1.0, -0.3, 0.4};
   const torch::Tensor x = RandomFeatures(200000, 3);
   const torch::Tensor p = torch::sigmoid(x.matmul(torch::tensor(truth, torch::kFloat64)));
   const torch::Tensor y = (torch::rand({x.size(0)}, torch::kFloat64) < p).to(torch::kFloat64);
@@ -47,7 +47,7 @@ TEST(ConfidenceModelTest, RidgeBoundsAFeatureThatSeparatesTheClasses) {
 
 TEST(ConfidenceModelTest, PredictionIsTheSigmoidOfTheWeightedFeatures) {
   ConfidenceModel model;
-  model.coefficients = {0.1, -0.2, 0.3, -0.4, 0.5, -0.6, 0.7, -0.8, 0.9};
+  model.coefficients = {0.1, -0.2, 0.3, -0.4, 0.5, -0.6, 0.7, -0.8};
   const torch::Tensor features = torch::randn({2, kConfidenceFeatures, 3, 4});
   const torch::Tensor predicted = PredictConfidence(model, features);
   ASSERT_EQ(predicted.sizes(), (std::vector<int64_t>{2, 1, 3, 4}));
@@ -57,10 +57,10 @@ TEST(ConfidenceModelTest, PredictionIsTheSigmoidOfTheWeightedFeatures) {
   }
   EXPECT_NEAR(predicted[1][0][2][3].item<double>(), 1 / (1 + std::exp(-z)), 1e-6);
   EXPECT_THROW(PredictConfidence(ConfidenceModel{}, features), std::invalid_argument);
-  EXPECT_THROW(PredictConfidence(model, features.narrow(1, 0, 8)), std::invalid_argument);
+  EXPECT_THROW(PredictConfidence(model, features.narrow(1, 0, 7)), std::invalid_argument);
 }
 
-TEST(ConfidenceModelTest, FeaturesReadTheRefinementPerPixelAndTheMapIsZeroWithoutTextureNear) {
+TEST(ConfidenceModelTest, FeaturesReadTheRefinementPerPixelAndTheMapIsZeroWithoutSignalNear) {
   PhotometricRefinement r;
   // Pixel 0: refined, output NCC 0.8, best 0.8; pixel 1: kept, 0.5 at the
   // network's depth while 0.9 was found elsewhere; pixel 2: none computed.
@@ -68,7 +68,7 @@ TEST(ConfidenceModelTest, FeaturesReadTheRefinementPerPixelAndTheMapIsZeroWithou
   r.score = torch::tensor({0.8f, 0.9f, -1.0f}).view({1, 1, 1, 3});
   r.refined = torch::tensor({true, false, false}).view({1, 1, 1, 3});
   r.texture = torch::tensor({0.1f, 0.02f, 0.0f}).view({1, 1, 1, 3});
-  r.texture_support = torch::tensor({1.0f, 0.25f, 0.0f}).view({1, 1, 1, 3});
+  r.signal_support = torch::tensor({1.0f, 0.25f, 0.0f}).view({1, 1, 1, 3});
   const torch::Tensor confidence = torch::tensor({0.9f, 0.6f, 0.99f}).view({1, 1, 1, 3});
   const torch::Tensor f = ConfidenceFeatures(confidence, r);
   ASSERT_EQ(f.sizes(), (std::vector<int64_t>{1, kConfidenceFeatures, 1, 3}));
@@ -81,16 +81,15 @@ TEST(ConfidenceModelTest, FeaturesReadTheRefinementPerPixelAndTheMapIsZeroWithou
       {0, 0.4, 0},
       {1, 0, 0},
       {std::log(0.1), std::log(0.02), std::log(1e-3)},
-      {0.64, 0.25, 0},
-      {1, 0.25, 0}};
+      {0.64, 0.25, 0}};
   for (int64_t feature = 0; feature < kConfidenceFeatures; ++feature) {
     for (int64_t pixel = 0; pixel < 3; ++pixel) {
       EXPECT_NEAR(at(feature, pixel), expected[feature][pixel], 1e-6) << feature << " " << pixel;
     }
   }
-  // The map: the model's prediction, 0 where no texture is near.
+  // The map: the model's prediction, 0 where no image signal is near.
   ConfidenceModel model;
-  model.coefficients = {0.2, 1, 1, 0, 0, 0, 0, 0, 0};
+  model.coefficients = {0.2, 1, 1, 0, 0, 0, 0, 0};
   const torch::Tensor map = ConfidenceMap(model, confidence, r);
   EXPECT_NEAR(map[0][0][0][0].item<double>(), 1 / (1 + std::exp(-(0.2 + 0.9 + 0.8))), 1e-6);
   EXPECT_NEAR(map[0][0][0][1].item<double>(), 1 / (1 + std::exp(-(0.2 + 0.6 + 0.5))), 1e-6);
@@ -99,12 +98,12 @@ TEST(ConfidenceModelTest, FeaturesReadTheRefinementPerPixelAndTheMapIsZeroWithou
 
 TEST(ConfidenceModelTest, TextRoundTripsExactlyAndRejectsBadInput) {
   ConfidenceModel model;
-  model.coefficients = {1.0 / 3, -2e-17, 5, 0, -0.125, 1e300, 7.25, -1, 2e-300};
+  model.coefficients = {1.0 / 3, -2e-17, 5, 0, -0.125, 1e300, 7.25, -2e-300};
   EXPECT_EQ(ConfidenceModel::FromText(model.ToText()).coefficients, model.coefficients);
   EXPECT_THROW(ConfidenceModel::FromText("1 2 3"), std::invalid_argument);
-  EXPECT_THROW(ConfidenceModel::FromText("1 2 3 4 5 6 7 8 x"), std::invalid_argument);
-  EXPECT_THROW(ConfidenceModel::FromText("1 2 3 4 5 6 7 8 nan"), std::invalid_argument);
-  EXPECT_THROW(ConfidenceModel::FromText("1 2 3 4 5 6 7 8 9 10"), std::invalid_argument);
+  EXPECT_THROW(ConfidenceModel::FromText("1 2 3 4 5 6 7 x"), std::invalid_argument);
+  EXPECT_THROW(ConfidenceModel::FromText("1 2 3 4 5 6 7 nan"), std::invalid_argument);
+  EXPECT_THROW(ConfidenceModel::FromText("1 2 3 4 5 6 7 8 9"), std::invalid_argument);
 }
 
 TEST(ConfidenceModelTest, WeightsFileCarriesTheModelAndKeepsEverythingElse) {
@@ -116,7 +115,7 @@ TEST(ConfidenceModelTest, WeightsFileCarriesTheModelAndKeepsEverythingElse) {
   EXPECT_TRUE(ReadConfidenceModel(plain).empty());
 
   ConfidenceModel model;
-  model.coefficients = {0.5, 1, 2, 3, 4, 5, 6, 7, 8};
+  model.coefficients = {0.5, 1, 2, 3, 4, 5, 6, 7};
   WriteConfidenceModel(plain, with, model);
   EXPECT_EQ(ReadConfidenceModel(with).coefficients, model.coefficients);
   const SafetensorsFile file = LoadSafetensors(with);

@@ -280,7 +280,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   result.score = torch::where(searchable, best_out, torch::full_like(best_out, -1.0));
   result.output_score = torch::where(searchable, output_score, torch::full_like(output_score, -1.0));
   result.texture = torch::sqrt(reference_var);
-  result.texture_support = WindowMean(textured.to(opts), kTextureSupportRadius);
+  result.signal_support = WindowMean((result.texture >= kSignalFloor).to(opts), kSignalRadius);
   return result;
 }
 

@@ -68,15 +68,19 @@ struct PhotometricRefinement {
   // confidence model (model/confidence_model.h) reads.
   torch::Tensor output_score;
   torch::Tensor texture;  // [B,1,H,W] standard deviation of the reference window's grey values
-  // [B,1,H,W] the share of textured windows (texture >= min_texture) within
-  // kTextureSupportRadius pixels: 0 where nothing near a pixel holds any
-  // image evidence to match or to interpolate from (a flat wall's middle,
-  // an all-black view).
-  torch::Tensor texture_support;
+  // [B,1,H,W] the share of windows within kSignalRadius pixels whose grey
+  // values vary at all (texture >= kSignalFloor): 0 where nothing near a
+  // pixel holds any image signal, only flat, clipped or empty image (an
+  // all-black view, a saturated sky).
+  torch::Tensor signal_support;
 };
 
-// The radius of PhotometricRefinement::texture_support, full-resolution pixels.
-inline constexpr int64_t kTextureSupportRadius = 32;
+// What "varies at all" means for signal_support: half a grey level of an
+// 8-bit image. Sensor noise alone lifts every window of a photograph or a
+// generated view above it; only exactly flat image stays below.
+inline constexpr double kSignalFloor = 0.002;
+// The radius of PhotometricRefinement::signal_support, full-resolution pixels.
+inline constexpr int64_t kSignalRadius = 32;
 
 // depth, valid: [B,1,H,W] (the network's DispMvsOutput::depth and valid).
 // Throws std::invalid_argument on mismatched shapes or V < 2.

@@ -376,7 +376,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("min_confidence", po::value<double>(&o.filter.min_confidence)->default_value(0.1, "0.1"),
        "Geometric filter and fusion: drop pixels (reference and source) whose confidence is "
        "lower. With the default --confidence model it is the estimated probability that the "
-       "depth is within 2 %, and 0 where no texture lies within 32 pixels: 0.1 drops what the "
+       "depth is within 2 %, and 0 where no image signal lies within 32 pixels: 0.1 drops what the "
        "images give no evidence for (all-black or all-white views fuse nothing) and little "
        "else. 0 keeps every pixel, as before.")
       ("mask_path", po::value<std::string>(&o.mask_path),
