@@ -341,7 +341,7 @@ std::vector<BadInputCase> Cases() {
        "error: cannot use the weights {DIR}/none.safetensors: safetensors {DIR}/none.safetensors: cannot open for reading (no such file)",
        Program::kColmap, Nothing(), fast + " --model_path {DIR}/none.safetensors"},
       {"model_truncated", 1,
-       "error: cannot use the weights {DIR}/cut.safetensors: safetensors {DIR}/cut.safetensors: tensor 'context_encoder.net.down16.first.conv.weight': data_offsets [3318596, 3429188] outside the data section of 3343308 bytes",
+       "error: cannot use the weights {DIR}/cut.safetensors: safetensors {DIR}/cut.safetensors: tensor 'context_encoder.net.down16.first.conv.weight': data_offsets [3318596, 3429188] outside the data section of 3343220 bytes",
        Program::kColmap,
        [](const fs::path& ws) {
          fs::copy_file(DISPMVS_MODEL_PATH, ws.parent_path() / "cut.safetensors");

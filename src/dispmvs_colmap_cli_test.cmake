@@ -437,7 +437,7 @@ elseif(CASE STREQUAL "stereo_pair")
   run_program(--mode fuse --workspace_path "${ws}" --max_depth_error 1e-12)
   expect_rc(0)
   expect_contains("${out}" "summary: fusion: 0 points from 2 image(s)\n")
-  expect_contains("${out}" "warning: ${ws}/fused.ply has 0 points: no pixel of the 2 image(s) with depth maps agreed with enough of its sources (--min_num_consistent 2, lowered for 2 reference image(s) as warned above; agreeing = within --max_reproj_error and --max_depth_error); the geometric lines above show the share each image kept\n")
+  expect_contains("${out}" "warning: ${ws}/fused.ply has 0 points: no pixel of the 2 image(s) with depth maps agreed with enough of its sources (--min_num_consistent 2, lowered for 2 reference image(s) as warned above; agreeing = within --max_reproj_error and --max_depth_error, at --min_confidence or more); the geometric lines above show the share each image kept\n")
 elseif(CASE STREQUAL "stereo_pair_explicit")
   # An explicit value no reference can meet: refused before any work, in
   # both modes that filter, naming the option and what to pass.
