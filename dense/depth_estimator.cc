@@ -115,7 +115,10 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
     if (options.fine_iterations > 0) impl_->config.fine_iterations = options.fine_iterations;
     impl_->net = model::DispMvsNet(impl_->config);
     model::LoadModuleWeights(*impl_->net, options.model_path);
-    if (options.confidence == "model") impl_->confidence_model = model::ReadConfidenceModel(options.model_path);
+    // The model reads the refinement's correlation and texture.
+    if (options.confidence == "model" && model::ParseRefinementMode(options.refinement, "--refinement")) {
+      impl_->confidence_model = model::ReadConfidenceModel(options.model_path);
+    }
   } catch (const std::exception& error) {
     throw std::runtime_error("cannot use the weights " + options.model_path + ": " + error.what());
   }
@@ -124,8 +127,6 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   impl_->net->set_precision(impl_->precision);
   impl_->refine = model::ParseRefinementMode(options.refinement, "--refinement");
   impl_->refinement = options.refinement_options;
-  // The model reads the refinement's correlation and texture.
-  if (!impl_->refine) impl_->confidence_model = {};
 }
 
 DepthEstimator::~DepthEstimator() = default;

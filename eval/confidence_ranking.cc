@@ -5,9 +5,6 @@
 #include <limits>
 #include <stdexcept>
 
-#include <opencv2/core.hpp>
-
-#include "eval/depth_metrics.h"
 
 namespace dispmvs::eval {
 
@@ -47,16 +44,11 @@ double ConfidenceRankingSums::ShareWithin2AtCoverage(double coverage) const {
   return right / kept;
 }
 
-ConfidenceRankingSums SumConfidenceRanking(const colmap_io::DenseArray& prediction,
-                                           const colmap_io::DenseArray& confidence,
-                                           const colmap_io::DenseArray& gt) {
-  if (confidence.width() != prediction.width() || confidence.height() != prediction.height() ||
-      confidence.channels() != 1) {
+ConfidenceRankingSums SumConfidenceRanking(const cv::Mat& rel_error, const colmap_io::DenseArray& confidence) {
+  if (rel_error.type() != CV_32FC1 || confidence.width() != rel_error.cols ||
+      confidence.height() != rel_error.rows || confidence.channels() != 1) {
     throw std::invalid_argument("the confidence map is not a one-channel map of the depth map's size");
   }
-  // The relative error of every pixel, sampled exactly as the depth metrics are.
-  cv::Mat rel_error;
-  SumDepthMetrics(prediction, gt, &rel_error);
   ConfidenceRankingSums sums;
   sums.pixels.assign(ConfidenceRankingSums::kBins, 0);
   sums.within_2.assign(ConfidenceRankingSums::kBins, 0);

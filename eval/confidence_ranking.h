@@ -14,6 +14,8 @@
 #include <cstdint>
 #include <vector>
 
+#include <opencv2/core.hpp>
+
 #include "colmap_io/dense_array.h"
 
 namespace dispmvs::eval {
@@ -21,7 +23,7 @@ namespace dispmvs::eval {
 struct ConfidenceRankingSums {
   static constexpr int kBins = 1000;
   // Per bin: predicted pixels with ground truth, and those within 2 %.
-  // Empty until the first Add.
+  // Empty for sums of no map.
   std::vector<int64_t> pixels, within_2;
 
   int64_t total() const;
@@ -35,13 +37,11 @@ struct ConfidenceRankingSums {
 // The coverages the reports show.
 inline const std::vector<double> kRankingCoverages{0.5, 0.75, 0.9, 1.0};
 
-// Adds every pixel of `prediction` that has a valid depth and valid ground
-// truth (sampled as SumDepthMetrics samples it) under its confidence,
-// clamped to [0, 1] (a non-finite confidence counts as 0). The confidence
-// map must have the prediction's size; throws std::invalid_argument
-// otherwise, or where SumDepthMetrics would.
-ConfidenceRankingSums SumConfidenceRanking(const colmap_io::DenseArray& prediction,
-                                           const colmap_io::DenseArray& confidence,
-                                           const colmap_io::DenseArray& gt);
+// The ranking of one map: every pixel with a relative error (`rel_error`,
+// the CV_32FC1 image SumDepthMetrics writes: >= 0 where both the prediction
+// and the ground truth exist) under its confidence, clamped to [0, 1] (a
+// non-finite confidence counts as 0). The confidence map must be one channel
+// of rel_error's size; throws std::invalid_argument otherwise.
+ConfidenceRankingSums SumConfidenceRanking(const cv::Mat& rel_error, const colmap_io::DenseArray& confidence);
 
 }  // namespace dispmvs::eval

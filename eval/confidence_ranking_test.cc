@@ -15,13 +15,22 @@ colmap_io::DenseArray Map(int width, int height, const std::vector<float>& value
   return map;
 }
 
+// The ranking of `depth` against `gt`, from the relative errors the depth
+// metrics compute, as dispmvs_eval ranks a map.
+ConfidenceRankingSums Rank(const colmap_io::DenseArray& depth, const colmap_io::DenseArray& confidence,
+                           const colmap_io::DenseArray& gt) {
+  cv::Mat rel_error;
+  SumDepthMetrics(depth, gt, &rel_error);
+  return SumConfidenceRanking(rel_error, confidence);
+}
+
 TEST(ConfidenceRankingTest, MostConfidentPixelsComeFirst) {
   // Four pixels with ground truth 10: errors 0.5 %, 10 %, 1 %, 30 %; one
   // without a prediction and one without ground truth (neither counted).
   const auto gt = Map(3, 2, {10, 10, 10, 10, 10, 0});
   const auto depth = Map(3, 2, {10.05f, 11, 9.9f, 13, 0, 5});
   const auto confidence = Map(3, 2, {0.9f, 0.2f, 0.7f, 0.1f, 1.0f, 1.0f});
-  const ConfidenceRankingSums sums = SumConfidenceRanking(depth, confidence, gt);
+  const ConfidenceRankingSums sums = Rank(depth, confidence, gt);
   EXPECT_EQ(sums.total(), 4);
   EXPECT_DOUBLE_EQ(sums.ShareWithin2AtCoverage(0.5), 1.0);
   EXPECT_DOUBLE_EQ(sums.ShareWithin2AtCoverage(0.75), 2.0 / 3);
@@ -35,7 +44,7 @@ TEST(ConfidenceRankingTest, MostConfidentPixelsComeFirst) {
 
   // Reversed confidence: the wrong pixels first.
   const auto reversed = Map(3, 2, {0.1f, 0.7f, 0.2f, 0.9f, 0, 0});
-  EXPECT_DOUBLE_EQ(SumConfidenceRanking(depth, reversed, gt).ShareWithin2AtCoverage(0.5), 0.0);
+  EXPECT_DOUBLE_EQ(Rank(depth, reversed, gt).ShareWithin2AtCoverage(0.5), 0.0);
 }
 
 TEST(ConfidenceRankingTest, SumsAddAcrossViewsAndBadInputIsRefused) {
@@ -43,14 +52,14 @@ TEST(ConfidenceRankingTest, SumsAddAcrossViewsAndBadInputIsRefused) {
   const auto depth = Map(2, 1, {10, 12});
   ConfidenceRankingSums total;
   EXPECT_TRUE(std::isnan(total.ShareWithin2AtCoverage(1.0)));
-  total += SumConfidenceRanking(depth, Map(2, 1, {0.6f, 0.4f}), gt);
-  total += SumConfidenceRanking(depth, Map(2, 1, {0.8f, std::nanf("")}), gt);  // NaN counts as 0
+  total += Rank(depth, Map(2, 1, {0.6f, 0.4f}), gt);
+  total += Rank(depth, Map(2, 1, {0.8f, std::nanf("")}), gt);  // NaN counts as 0
   EXPECT_EQ(total.total(), 4);
   EXPECT_DOUBLE_EQ(total.ShareWithin2AtCoverage(0.5), 1.0);
   EXPECT_DOUBLE_EQ(total.ShareWithin2AtCoverage(1.0), 0.5);
   EXPECT_THROW(total.ShareWithin2AtCoverage(0.0), std::invalid_argument);
   EXPECT_THROW(total.ShareWithin2AtCoverage(1.5), std::invalid_argument);
-  EXPECT_THROW(SumConfidenceRanking(depth, Map(1, 1, {0.5f}), gt), std::invalid_argument);
+  EXPECT_THROW(Rank(depth, Map(1, 1, {0.5f}), gt), std::invalid_argument);
 }
 
 }  // namespace

@@ -248,11 +248,19 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
       continue;
     }
     const colmap_io::DenseArray map = ReadDepthMap(map_path, "depth map");
+    // The confidence map, when there is one of the depth map's size: its
+    // ranking reads the relative errors the depth metrics compute.
+    std::optional<colmap_io::DenseArray> confidence;
+    const fs::path confidence_path = workspace.ConfidenceMapPath(image.name, type);
+    if (IsFile(confidence_path)) {
+      confidence = ReadDepthMap(confidence_path, "confidence map");
+      if (confidence->width() != map.width() || confidence->height() != map.height()) confidence.reset();
+    }
     cv::Mat rel_error;
     DepthMetricSums view_sums;
     DisparityMetricSums disparity_sums;
     try {
-      view_sums = SumDepthMetrics(map, gt, write_png ? &rel_error : nullptr);
+      view_sums = SumDepthMetrics(map, gt, write_png || confidence ? &rel_error : nullptr);
       if (disparity_geometry) {
         disparity_sums = SumDisparityMetrics(
             map, gt, disparity_geometry->focal * disparity_geometry->partner.baseline);
@@ -277,13 +285,9 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
     view.disparity_geometry = disparity_geometry;
     view.disparity = Finalize(disparity_sums);
     report->types[t].views.push_back(std::move(view));
-    const fs::path confidence_path = workspace.ConfidenceMapPath(image.name, type);
-    if (IsFile(confidence_path)) {
-      const colmap_io::DenseArray confidence = ReadDepthMap(confidence_path, "confidence map");
-      if (confidence.width() == map.width() && confidence.height() == map.height() && confidence.channels() == 1) {
-        report->types[t].confidence_ranking += SumConfidenceRanking(map, confidence, gt);
-        ++report->types[t].views_with_confidence;
-      }
+    if (confidence) {
+      report->types[t].confidence_ranking += SumConfidenceRanking(rel_error, *confidence);
+      ++report->types[t].views_with_confidence;
     }
     (*sums)[t].depth += view_sums;
     (*sums)[t].disparity += disparity_sums;

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 
@@ -21,10 +22,16 @@ torch::Tensor ConfidenceFeatures(const torch::Tensor& network_confidence, const 
                     1);
 }
 
+torch::Tensor ConfidenceFromFeatures(const ConfidenceModel& model, const torch::Tensor& features,
+                                     const torch::Tensor& signal_support) {
+  const torch::Tensor predicted = PredictConfidence(model, features);
+  return torch::where(signal_support.to(predicted.device()) > 0, predicted, torch::zeros_like(predicted));
+}
+
 torch::Tensor ConfidenceMap(const ConfidenceModel& model, const torch::Tensor& network_confidence,
                             const PhotometricRefinement& refinement) {
-  const torch::Tensor predicted = PredictConfidence(model, ConfidenceFeatures(network_confidence, refinement));
-  return torch::where(refinement.signal_support.to(predicted.device()) > 0, predicted, torch::zeros_like(predicted));
+  return ConfidenceFromFeatures(model, ConfidenceFeatures(network_confidence, refinement),
+                                refinement.signal_support);
 }
 
 std::string ConfidenceModel::ToText() const {
@@ -111,9 +118,9 @@ ConfidenceModel FitConfidenceModel(const torch::Tensor& features, const torch::T
 }
 
 ConfidenceModel ReadConfidenceModel(const std::string& weights_path) {
-  const SafetensorsFile file = LoadSafetensors(weights_path);
-  const auto found = file.metadata.find(kConfidenceModelKey);
-  if (found == file.metadata.end()) return {};
+  const std::map<std::string, std::string> metadata = ReadSafetensorsMetadata(weights_path);
+  const auto found = metadata.find(kConfidenceModelKey);
+  if (found == metadata.end()) return {};
   try {
     return ConfidenceModel::FromText(found->second);
   } catch (const std::invalid_argument& e) {

@@ -70,6 +70,11 @@ torch::Tensor PredictConfidence(const ConfidenceModel& model, const torch::Tenso
 torch::Tensor ConfidenceMap(const ConfidenceModel& model, const torch::Tensor& network_confidence,
                             const PhotometricRefinement& refinement);
 
+// The same from features already computed (ConfidenceFeatures) and the
+// refinement's signal_support, [B,1,H,W]: what the fit's curves rank.
+torch::Tensor ConfidenceFromFeatures(const ConfidenceModel& model, const torch::Tensor& features,
+                                     const torch::Tensor& signal_support);
+
 // Maximum-likelihood logistic regression (Newton's method, a small ridge on
 // every coefficient but the intercept so that a feature constant in the data
 // stays bounded). features [M,kConfidenceFeatures], labels [M] in {0, 1}.

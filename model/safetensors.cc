@@ -394,11 +394,15 @@ void SaveModuleWeights(const torch::nn::Module& module, const ModelConfig& confi
   SaveSafetensors(path, ModuleTensors(module), config.ToMetadata());
 }
 
-ModelConfig ReadModelConfig(const std::string& path) {
+std::map<std::string, std::string> ReadSafetensorsMetadata(const std::string& path) {
   std::ifstream in;
-  const Header header = ReadHeader(path, in);
+  return ReadHeader(path, in).metadata;
+}
+
+ModelConfig ReadModelConfig(const std::string& path) {
+  const std::map<std::string, std::string> metadata = ReadSafetensorsMetadata(path);
   try {
-    return ModelConfig::FromMetadata(header.metadata);
+    return ModelConfig::FromMetadata(metadata);
   } catch (const std::invalid_argument& e) {
     FileError(path, e.what());
   }

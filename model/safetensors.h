@@ -43,6 +43,10 @@ SafetensorsFile LoadSafetensors(const std::string& path);
 void SaveModuleWeights(const torch::nn::Module& module, const ModelConfig& config,
                        const std::string& path);
 
+// A file's metadata, from its header alone (no tensor data is read; the
+// header is validated as LoadSafetensors validates it).
+std::map<std::string, std::string> ReadSafetensorsMetadata(const std::string& path);
+
 // The ModelConfig stored in a weights file's metadata (validated by Check()).
 ModelConfig ReadModelConfig(const std::string& path);
 

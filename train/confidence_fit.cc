@@ -19,10 +19,11 @@ constexpr double kTolerance = 0.02;
 // apart from any training run's.
 constexpr uint64_t kFitSalt = 0xC0F1D5u;
 
-// One scene's pixels: features [M,F], whether each is within the tolerance,
-// and the network's confidence, over the predicted pixels with ground truth.
+// One scene's pixels: features [M,F] (the network's confidence is feature
+// 1), whether each is within the tolerance, and the refinement's signal
+// support, over the predicted pixels with ground truth.
 struct ScenePixels {
-  torch::Tensor features, correct, network_confidence, signal_support;
+  torch::Tensor features, correct, signal_support;
 };
 
 ScenePixels RunScene(model::DispMvsNet& net, const synth::SynthSample& scene, uint64_t seed,
@@ -43,20 +44,18 @@ ScenePixels RunScene(model::DispMvsNet& net, const synth::SynthSample& scene, ui
   ScenePixels pixels;
   pixels.features = features.permute({0, 2, 3, 1}).reshape({-1, model::kConfidenceFeatures}).index({used});
   pixels.correct = within.index({used});
-  pixels.network_confidence = every(output.confidence).cpu().flatten().index({used});
   pixels.signal_support = every(refinement.signal_support).cpu().flatten().index({used});
   return pixels;
 }
 
 ScenePixels RunScenes(model::DispMvsNet& net, const std::vector<synth::SynthSample>& scenes, uint64_t seed_base,
                       const TrainOptions& options, int64_t stride, const std::string& what, std::ostream& log) {
-  std::vector<torch::Tensor> features, correct, confidence, support;
+  std::vector<torch::Tensor> features, correct, support;
   for (size_t i = 0; i < scenes.size(); ++i) {
     const auto start = std::chrono::steady_clock::now();
     const ScenePixels p = RunScene(net, scenes[i], seed_base + i, options, stride);
     features.push_back(p.features);
     correct.push_back(p.correct);
-    confidence.push_back(p.network_confidence);
     support.push_back(p.signal_support);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     char line[160];
@@ -66,18 +65,18 @@ ScenePixels RunScenes(model::DispMvsNet& net, const std::vector<synth::SynthSamp
     log << line << std::endl;
   }
   if (features.empty()) throw std::invalid_argument("confidence fit: no " + what + " scenes");
-  return {torch::cat(features), torch::cat(correct), torch::cat(confidence), torch::cat(support)};
+  return {torch::cat(features), torch::cat(correct), torch::cat(support)};
 }
 
 ConfidenceCurves Curves(const ScenePixels& pixels, const model::ConfidenceModel& model) {
   ConfidenceCurves curves;
   curves.pixels = pixels.correct.size(0);
-  curves.network = ShareCorrectAtCoverage(pixels.network_confidence, pixels.correct, kConfidenceCoverages);
-  // As model::ConfidenceMap gives it: 0 without image signal nearby.
-  const torch::Tensor predicted = torch::where(
-      pixels.signal_support > 0,
-      model::PredictConfidence(model, pixels.features.t().reshape({1, model::kConfidenceFeatures, -1, 1})).flatten(),
-      torch::zeros({pixels.features.size(0)}, pixels.features.options()));
+  curves.network = ShareCorrectAtCoverage(pixels.features.select(1, 1), pixels.correct, kConfidenceCoverages);
+  // The pixels as one [1,F,M,1] map, ranked as dispmvs_colmap writes them.
+  const torch::Tensor predicted =
+      model::ConfidenceFromFeatures(model, pixels.features.t().reshape({1, model::kConfidenceFeatures, -1, 1}),
+                                    pixels.signal_support.view({1, 1, -1, 1}))
+          .flatten();
   curves.model = ShareCorrectAtCoverage(predicted, pixels.correct, kConfidenceCoverages);
   return curves;
 }
