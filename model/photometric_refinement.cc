@@ -70,13 +70,55 @@ std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopes(const torch::Tensor& 
 }
 
 // The plane of the pixel (dx, dy) away, extended to every pixel:
-// w(p + o) - o . slope(p + o); 0 where that pixel has no depth.
+// w(p + o) - o . slope(p + o); 0 where that pixel has no depth. Computed
+// at the neighbour, then shifted once: a third of the passes of shifting
+// the depth and both slopes.
 torch::Tensor PlaneFromNeighbour(const torch::Tensor& w, const torch::Tensor& gx,
                                  const torch::Tensor& gy, int64_t dx, int64_t dy) {
-  const torch::Tensor neighbour = Shifted(w, dx, dy);
-  const torch::Tensor plane = neighbour - static_cast<double>(dx) * Shifted(gx, dx, dy) -
-                              static_cast<double>(dy) * Shifted(gy, dx, dy);
-  return torch::where((neighbour > 0) & (plane > 0), plane, torch::zeros_like(plane));
+  const torch::Tensor plane = w - gx * static_cast<double>(dx) - gy * static_cast<double>(dy);
+  return Shifted(torch::where((w > 0) & (plane > 0), plane, torch::zeros_like(plane)), dx, dy);
+}
+
+// Propagation's update, in place: where `allowed` and the candidate lies in
+// [floor, ceiling] and scores at least min_ncc and better than `current`,
+// it replaces w_out and current, and `changed` is set. One loop on CPU
+// float maps (of one batch item's floor and ceiling each) instead of a
+// dozen full-size operations; the same operations elsewhere.
+void TakeBetterCandidates(const torch::Tensor& candidate, const torch::Tensor& candidate_score,
+                          const torch::Tensor& allowed, const torch::Tensor& floor, const torch::Tensor& ceiling,
+                          double min_ncc, torch::Tensor& w_out, torch::Tensor& current, torch::Tensor& changed) {
+  const bool cpu = candidate.device().is_cpu() && candidate.scalar_type() == torch::kFloat32 &&
+                   candidate_score.scalar_type() == torch::kFloat32 && w_out.scalar_type() == torch::kFloat32 &&
+                   current.scalar_type() == torch::kFloat32 && w_out.is_contiguous() && current.is_contiguous() &&
+                   changed.is_contiguous() && changed.scalar_type() == torch::kBool;
+  if (!cpu) {
+    const torch::Tensor take = allowed & (candidate >= floor) & (candidate <= ceiling) &
+                               (candidate_score >= min_ncc) & (candidate_score > current);
+    w_out = torch::where(take, candidate, w_out);
+    current = torch::where(take, candidate_score, current);
+    changed = changed | take;
+    return;
+  }
+  const torch::Tensor c = candidate.contiguous(), s = candidate_score.contiguous(), a = allowed.contiguous();
+  const torch::Tensor lo = floor.contiguous(), hi = ceiling.contiguous();
+  const int64_t batch = c.size(0), plane = c.numel() / batch;
+  const float* c_p = c.data_ptr<float>();
+  const float* s_p = s.data_ptr<float>();
+  const bool* a_p = a.data_ptr<bool>();
+  float* w_p = w_out.data_ptr<float>();
+  float* cur_p = current.data_ptr<float>();
+  bool* ch_p = changed.data_ptr<bool>();
+  const float min_score = static_cast<float>(min_ncc);
+  for (int64_t item = 0; item < batch; ++item) {
+    const float low = lo.data_ptr<float>()[item], high = hi.data_ptr<float>()[item];
+    for (int64_t p = item * plane; p < (item + 1) * plane; ++p) {
+      if (a_p[p] && c_p[p] >= low && c_p[p] <= high && s_p[p] >= min_score && s_p[p] > cur_p[p]) {
+        w_p[p] = c_p[p];
+        cur_p[p] = s_p[p];
+        ch_p[p] = true;
+      }
+    }
+  }
 }
 
 void CheckShapes(const torch::Tensor& images, const torch::Tensor& intrinsics,
@@ -194,24 +236,21 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   };
   const auto [ncc_at_start, ok_at_start] = correlate(w0);
   const torch::Tensor weights = BetterHalfOfSources(ncc_at_start, ok_at_start);
-  const torch::Tensor weight_sum = weights.sum(1, /*keepdim=*/true);
   // A chosen source whose window leaves its image at some hypothesis scores
   // -1 there (the worst correlation): the search does not wander off the
-  // sources it was judged on.
-  const auto score = [&](const torch::Tensor& ncc, const torch::Tensor& ok) {
-    const torch::Tensor per_source = torch::where(ok, ncc, torch::full_like(ncc, -1.0));
-    return torch::where(weight_sum > 0, (per_source * weights).sum(1, true) / weight_sum.clamp_min(1),
-                        torch::full_like(weight_sum, -1.0));
+  // sources it was judged on (CombineSources, ScoreAlongSurface).
+  const auto surface_score = [&](const torch::Tensor& surface) {
+    return ScoreAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, surface, weights, r, margin);
   };
   const torch::Tensor textured = torch::sqrt(reference_var) >= options.min_texture;
 
   std::vector<torch::Tensor> scores;
   for (int64_t k = -options.steps; k <= options.steps; ++k) {
     if (k == 0) {
-      scores.push_back(score(ncc_at_start, ok_at_start));
+      scores.push_back(CombineSources({ncc_at_start.reshape({b * n, 1, h, w}), ok_at_start.reshape({b * n, 1, h, w})},
+                                      weights));
     } else {
-      const auto [ncc, ok] = correlate(torch::add(w0, dw, static_cast<double>(k)));
-      scores.push_back(score(ncc, ok));
+      scores.push_back(surface_score(torch::add(w0, dw, static_cast<double>(k))));
     }
   }
   const torch::Tensor volume = torch::cat(scores, 1);  // [B,2K+1,H,W]
@@ -230,7 +269,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                                 (best >= options.min_ncc) & (before > -1) & (after > -1) & (w_new > 0);
 
   torch::Tensor w_out = torch::where(refined, w_new, w0);
-  torch::Tensor changed = refined;
+  torch::Tensor changed = refined.clone();  // updated in place by propagation
   torch::Tensor best_out = best;
   torch::Tensor output_score = torch::where(refined, best, scores[static_cast<size_t>(options.steps)]);
   if (options.propagation_rounds > 0) {
@@ -240,10 +279,6 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     // propagation_levels levels, so a right surface crosses a wrong block of
     // the network's in a few steps (as PatchMatch's propagation does, but
     // on whole maps, so every candidate costs one warp and window pass).
-    const auto surface_score = [&](const torch::Tensor& surface) {
-      const auto [ncc, ok] = correlate(surface);
-      return score(ncc, ok);
-    };
     const torch::Tensor candidates_allowed = searchable & textured;
     // Candidates stay within the inverse depths the network gave this view:
     // a plane extrapolated over a long jump can reach inverse depths near 0,
@@ -259,12 +294,8 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
         const int64_t offsets[4][2] = {{distance, 0}, {-distance, 0}, {0, distance}, {0, -distance}};
         for (const auto& offset : offsets) {
           const torch::Tensor candidate = PlaneFromNeighbour(w_out, slope_x, slope_y, offset[0], offset[1]);
-          const torch::Tensor candidate_score = surface_score(candidate);
-          const torch::Tensor take = candidates_allowed & (candidate >= w_floor) & (candidate <= w_ceiling) &
-                                     (candidate_score >= options.min_ncc) & (candidate_score > current);
-          w_out = torch::where(take, candidate, w_out);
-          current = torch::where(take, candidate_score, current);
-          changed = changed | take;
+          TakeBetterCandidates(candidate, surface_score(candidate), candidates_allowed, w_floor, w_ceiling,
+                               options.min_ncc, w_out, current, changed);
         }
       }
     }

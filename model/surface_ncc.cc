@@ -2,7 +2,9 @@
 
 #include <ATen/Parallel.h>
 
+#include <algorithm>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -35,6 +37,14 @@ void CheckShapes(const torch::Tensor& source, const torch::Tensor& reference,
       source.size(0) % surface.size(0) != 0 || surface.size(2) != source.size(2) ||
       surface.size(3) != source.size(3)) {
     fail("surface must be [B,1,H,W] with B dividing source's B*N");
+  }
+}
+
+void CheckWeights(const torch::Tensor& weights, const torch::Tensor& source, const torch::Tensor& surface) {
+  const int64_t n = source.size(0) / surface.size(0);
+  if (!weights.defined() ||
+      weights.sizes() != torch::IntArrayRef({surface.size(0), n, source.size(2), source.size(3)})) {
+    throw std::invalid_argument("ScoreAlongSurface: weights must be [B,N,H,W]");
   }
 }
 
@@ -81,28 +91,36 @@ struct PlaneSampler {
   }
 };
 
-// One source plane in one streaming pass: rows are sampled as the window
-// reaches them into a ring of 2r + 2 rows, column sums of v, v^2 and
-// reference * v move down with the window (in double, so that adding and
-// removing 2r + 1 rows at a time leaves no drift), and each output row's
-// window sums are a running sum along those columns. Nothing of full size is
-// written but the NCC and the flags.
-void CorrelatePlane(const PlaneSampler& sampler, const float* reference, const float* reference_mean,
-                    const float* reference_var, int64_t r, float* ncc, bool* ok) {
+// Rows [row_begin, row_end) of one source plane in one streaming pass: rows
+// are sampled as the window reaches them (from row_begin - r) into a ring of
+// 2r + 2 rows, column sums of v, v^2 and reference * v move down with the
+// window (in double, so that adding and removing 2r + 1 rows at a time
+// leaves no drift), and each output row's window sums are a running sum
+// along those columns. Nothing of full size is written but the NCC and the
+// flags; ncc and ok point at row_begin's first pixel.
+void CorrelateRows(const PlaneSampler& sampler, const float* reference, const float* reference_mean,
+                   const float* reference_var, int64_t r, int64_t row_begin, int64_t row_end, float* ncc,
+                   bool* ok) {
   const int64_t h = sampler.h, w = sampler.w;
   const int64_t ring = 2 * r + 2;
   std::vector<float> values(static_cast<size_t>(ring * w));
+  std::vector<char> inside(static_cast<size_t>(ring * w));
   std::vector<double> columns(static_cast<size_t>(3 * w), 0.0);
   double* col_v = columns.data();
   double* col_vv = col_v + w;
   double* col_rv = col_vv + w;
   // Adds (sign +1) or removes (-1) row k of the ring to the column sums;
-  // sampling it first when it comes in (its inside flags go to ok's row).
+  // sampling it first when it comes in.
   const auto take_row = [&](int64_t k, double sign) {
     float* v = values.data() + (k % ring) * w;
     const float* ref_row = reference + k * w;
     if (sign > 0) {
-      for (int64_t j = 0; j < w; ++j) v[j] = sampler.Sample(k * w + j, ok + k * w + j);
+      char* in = inside.data() + (k % ring) * w;
+      for (int64_t j = 0; j < w; ++j) {
+        bool is_inside = false;
+        v[j] = sampler.Sample(k * w + j, &is_inside);
+        in[j] = is_inside;
+      }
     }
     for (int64_t j = 0; j < w; ++j) {
       const double value = v[j];
@@ -111,9 +129,12 @@ void CorrelatePlane(const PlaneSampler& sampler, const float* reference, const f
       col_rv[j] += sign * static_cast<double>(ref_row[j] * v[j]);
     }
   };
-  for (int64_t k = 0; k <= std::min(r, h - 1); ++k) take_row(k, 1.0);
-  for (int64_t i = 0; i < h; ++i) {
+  for (int64_t k = std::max<int64_t>(row_begin - r, 0); k <= std::min(row_begin + r, h - 1); ++k) take_row(k, 1.0);
+  for (int64_t i = row_begin; i < row_end; ++i) {
     const int64_t rows = std::min(i + r, h - 1) - std::max<int64_t>(i - r, 0) + 1;
+    const char* in = inside.data() + (i % ring) * w;
+    float* ncc_row = ncc + (i - row_begin) * w;
+    bool* ok_row = ok + (i - row_begin) * w;
     double s_v = 0, s_vv = 0, s_rv = 0;
     for (int64_t j = 0; j <= std::min(r, w - 1); ++j) {
       s_v += col_v[j];
@@ -127,8 +148,8 @@ void CorrelatePlane(const PlaneSampler& sampler, const float* reference, const f
       const float s_mean = static_cast<float>(s_v * inverse_count);
       const float s_var = std::max(static_cast<float>(s_vv * inverse_count) - s_mean * s_mean, 0.0f);
       const float covariance = static_cast<float>(s_rv * inverse_count) - reference_mean[p] * s_mean;
-      ncc[p] = covariance / std::sqrt(std::max(reference_var[p] * s_var, 1e-12f));
-      ok[p] = ok[p] && s_var > 1e-10f;
+      ncc_row[j] = covariance / std::sqrt(std::max(reference_var[p] * s_var, 1e-12f));
+      ok_row[j] = in[j] && s_var > 1e-10f;
       if (j + r + 1 < w) {
         s_v += col_v[j + r + 1];
         s_vv += col_vv[j + r + 1];
@@ -145,41 +166,126 @@ void CorrelatePlane(const PlaneSampler& sampler, const float* reference, const f
   }
 }
 
+// The CPU loops split every plane into bands of this many rows, so that
+// two-view workspaces (one source plane) use every thread too. Fixed, not
+// derived from the thread count: a band's sums start afresh at its first
+// row, and the results stay the same whatever the number of threads. Each
+// band samples 2r rows more than it outputs (6 of 64 at r = 3).
+constexpr int64_t kBandRows = 64;
+
+int64_t BandCount(int64_t h) { return (h + kBandRows - 1) / kBandRows; }
+
+// Everything the CPU loops read, contiguous, and the sampler of plane i.
+struct CpuPlanes {
+  torch::Tensor src, ref, mean, var, a, b, surface;
+  int64_t planes, n, h, w;
+  bool b_per_pixel;
+  float half_w, half_h;
+  double margin;
+
+  CpuPlanes(const torch::Tensor& source, const torch::Tensor& reference, const torch::Tensor& reference_mean,
+            const torch::Tensor& reference_var, const torch::Tensor& a_in, const torch::Tensor& b_in,
+            const torch::Tensor& surface_in, double margin_in)
+      : src(source.contiguous()),
+        ref(reference.contiguous()),
+        mean(reference_mean.contiguous()),
+        var(reference_var.contiguous()),
+        a(a_in.contiguous()),
+        b(b_in.contiguous()),
+        surface(surface_in.contiguous()),
+        planes(source.size(0)),
+        n(source.size(0) / surface_in.size(0)),
+        h(source.size(2)),
+        w(source.size(3)),
+        b_per_pixel(b_in.size(2) == source.size(2) && b_in.size(3) == source.size(3) &&
+                    source.size(2) * source.size(3) > 1),
+        half_w(0.5f * static_cast<float>(source.size(3) - 1)),
+        half_h(0.5f * static_cast<float>(source.size(2) - 1)),
+        margin(margin_in) {}
+
+  PlaneSampler Sampler(int64_t i) const {
+    const int64_t hw = h * w;
+    return PlaneSampler{src.data_ptr<float>() + i * hw,
+                        a.data_ptr<float>() + i * 3 * hw,
+                        b.data_ptr<float>() + i * (b_per_pixel ? 3 * hw : 3),
+                        surface.data_ptr<float>() + (i / n) * hw,
+                        h,
+                        w,
+                        b_per_pixel,
+                        half_w,
+                        half_h,
+                        half_w - static_cast<float>(margin),
+                        half_h - static_cast<float>(margin)};
+  }
+
+  void Correlate(int64_t i, int64_t radius, int64_t row_begin, int64_t row_end, float* ncc, bool* ok) const {
+    const int64_t hw = h * w;
+    CorrelateRows(Sampler(i), ref.data_ptr<float>() + i * hw, mean.data_ptr<float>() + i * hw,
+                  var.data_ptr<float>() + i * hw, radius, row_begin, row_end, ncc, ok);
+  }
+};
+
 SurfaceCorrelation CorrelateAlongSurfaceCpu(const torch::Tensor& source, const torch::Tensor& reference,
                                             const torch::Tensor& reference_mean,
                                             const torch::Tensor& reference_var, const torch::Tensor& a,
                                             const torch::Tensor& b, const torch::Tensor& surface,
                                             int64_t radius, double margin) {
-  const int64_t planes = source.size(0), h = source.size(2), w = source.size(3), hw = h * w;
-  const int64_t n = planes / surface.size(0);
-  const bool b_per_pixel = b.size(2) == h && b.size(3) == w && hw > 1;
-  const int64_t b_plane = b_per_pixel ? 3 * hw : 3;
-  const torch::Tensor src = source.contiguous(), ref = reference.contiguous();
-  const torch::Tensor mean_c = reference_mean.contiguous(), var_c = reference_var.contiguous();
-  const torch::Tensor a_c = a.contiguous(), b_c = b.contiguous(), surface_c = surface.contiguous();
+  const CpuPlanes in(source, reference, reference_mean, reference_var, a, b, surface, margin);
+  const int64_t hw = in.h * in.w, bands = BandCount(in.h);
   SurfaceCorrelation result;
-  result.ncc = torch::empty({planes, 1, h, w}, source.options());
-  result.ok = torch::empty({planes, 1, h, w}, source.options().dtype(torch::kBool));
-  const float half_w = 0.5f * static_cast<float>(w - 1), half_h = 0.5f * static_cast<float>(h - 1);
-  at::parallel_for(0, planes, 1, [&](int64_t begin, int64_t end) {
-    for (int64_t i = begin; i < end; ++i) {
-      const PlaneSampler sampler{src.data_ptr<float>() + i * hw,
-                                 a_c.data_ptr<float>() + i * 3 * hw,
-                                 b_c.data_ptr<float>() + i * b_plane,
-                                 surface_c.data_ptr<float>() + (i / n) * hw,
-                                 h,
-                                 w,
-                                 b_per_pixel,
-                                 half_w,
-                                 half_h,
-                                 half_w - static_cast<float>(margin),
-                                 half_h - static_cast<float>(margin)};
-      CorrelatePlane(sampler, ref.data_ptr<float>() + i * hw, mean_c.data_ptr<float>() + i * hw,
-                     var_c.data_ptr<float>() + i * hw, radius, result.ncc.data_ptr<float>() + i * hw,
-                     result.ok.data_ptr<bool>() + i * hw);
+  result.ncc = torch::empty({in.planes, 1, in.h, in.w}, source.options());
+  result.ok = torch::empty({in.planes, 1, in.h, in.w}, source.options().dtype(torch::kBool));
+  float* ncc = result.ncc.data_ptr<float>();
+  bool* ok = result.ok.data_ptr<bool>();
+  at::parallel_for(0, in.planes * bands, 1, [&](int64_t begin, int64_t end) {
+    for (int64_t task = begin; task < end; ++task) {
+      const int64_t i = task / bands, row_begin = (task % bands) * kBandRows;
+      const int64_t row_end = std::min(row_begin + kBandRows, in.h);
+      in.Correlate(i, radius, row_begin, row_end, ncc + i * hw + row_begin * in.w, ok + i * hw + row_begin * in.w);
     }
   });
   return result;
+}
+
+// The score of SurfaceScoreByOps, one band of one batch item per task: each
+// selected source's NCC rows go to a band-sized buffer and are summed at
+// once, so no per-source map is written.
+torch::Tensor ScoreAlongSurfaceCpu(const torch::Tensor& source, const torch::Tensor& reference,
+                                   const torch::Tensor& reference_mean, const torch::Tensor& reference_var,
+                                   const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& surface,
+                                   const torch::Tensor& weights, int64_t radius, double margin) {
+  const CpuPlanes in(source, reference, reference_mean, reference_var, a, b, surface, margin);
+  const torch::Tensor weights_c = weights.contiguous();
+  const int64_t batch = surface.size(0), hw = in.h * in.w, bands = BandCount(in.h);
+  torch::Tensor score = torch::empty({batch, 1, in.h, in.w}, source.options());
+  float* out = score.data_ptr<float>();
+  const float* weight = weights_c.data_ptr<float>();
+  at::parallel_for(0, batch * bands, 1, [&](int64_t begin, int64_t end) {
+    std::vector<float> ncc(static_cast<size_t>(kBandRows * in.w)), sum(ncc.size()), weight_sum(ncc.size());
+    std::unique_ptr<bool[]> ok(new bool[ncc.size()]);
+    for (int64_t task = begin; task < end; ++task) {
+      const int64_t item = task / bands, row_begin = (task % bands) * kBandRows;
+      const int64_t row_end = std::min(row_begin + kBandRows, in.h), count = (row_end - row_begin) * in.w;
+      std::fill(sum.begin(), sum.begin() + count, 0.0f);
+      std::fill(weight_sum.begin(), weight_sum.begin() + count, 0.0f);
+      for (int64_t s = 0; s < in.n; ++s) {
+        const float* wgt = weight + (item * in.n + s) * hw + row_begin * in.w;
+        bool any = false;
+        for (int64_t p = 0; p < count && !any; ++p) any = wgt[p] != 0;
+        if (!any) continue;  // no pixel of the band counts this source
+        in.Correlate(item * in.n + s, radius, row_begin, row_end, ncc.data(), ok.get());
+        for (int64_t p = 0; p < count; ++p) {
+          sum[p] += wgt[p] * (ok[p] ? ncc[p] : -1.0f);
+          weight_sum[p] += wgt[p];
+        }
+      }
+      float* out_band = out + item * hw + row_begin * in.w;
+      for (int64_t p = 0; p < count; ++p) {
+        out_band[p] = weight_sum[p] > 0 ? sum[p] / std::max(weight_sum[p], 1.0f) : -1.0f;
+      }
+    }
+  });
+  return score;
 }
 
 // CorrelateAlongSurfaceByOps on checked shapes.
@@ -242,6 +348,44 @@ SurfaceCorrelation CorrelateAlongSurface(const torch::Tensor& source, const torc
                                     margin);
   }
   return CorrelateByOps(source, reference, reference_mean, reference_var, a, b, surface, radius, margin);
+}
+
+torch::Tensor ScoreAlongSurfaceByOps(const torch::Tensor& source, const torch::Tensor& reference,
+                                    const torch::Tensor& reference_mean, const torch::Tensor& reference_var,
+                                    const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& surface,
+                                    const torch::Tensor& weights, int64_t radius, double margin) {
+  CheckShapes(source, reference, reference_mean, reference_var, a, b, surface);
+  CheckWeights(weights, source, surface);
+  const SurfaceCorrelation c =
+      CorrelateByOps(source, reference, reference_mean, reference_var, a, b, surface, radius, margin);
+  return CombineSources(c, weights);
+}
+
+torch::Tensor ScoreAlongSurface(const torch::Tensor& source, const torch::Tensor& reference,
+                                const torch::Tensor& reference_mean, const torch::Tensor& reference_var,
+                                const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& surface,
+                                const torch::Tensor& weights, int64_t radius, double margin) {
+  CheckShapes(source, reference, reference_mean, reference_var, a, b, surface);
+  CheckWeights(weights, source, surface);
+  bool cpu_float = true;
+  for (const torch::Tensor* t : {&source, &reference, &reference_mean, &reference_var, &a, &b, &surface, &weights}) {
+    cpu_float = cpu_float && t->device().is_cpu() && t->scalar_type() == torch::kFloat32;
+  }
+  if (cpu_float) {
+    return ScoreAlongSurfaceCpu(source, reference, reference_mean, reference_var, a, b, surface, weights, radius,
+                                margin);
+  }
+  return ScoreAlongSurfaceByOps(source, reference, reference_mean, reference_var, a, b, surface, weights, radius,
+                                margin);
+}
+
+torch::Tensor CombineSources(const SurfaceCorrelation& correlation, const torch::Tensor& weights) {
+  const int64_t batch = weights.size(0), n = weights.size(1), h = weights.size(2), w = weights.size(3);
+  const torch::Tensor ncc = correlation.ncc.view({batch, n, h, w}), ok = correlation.ok.view({batch, n, h, w});
+  const torch::Tensor per_source = torch::where(ok, ncc, torch::full_like(ncc, -1.0));
+  const torch::Tensor weight_sum = weights.sum(1, /*keepdim=*/true);
+  return torch::where(weight_sum > 0, (per_source * weights).sum(1, true) / weight_sum.clamp_min(1),
+                      torch::full_like(weight_sum, -1.0));
 }
 
 }  // namespace dispmvs::model

@@ -6,7 +6,8 @@
 //
 // Every hypothesis of the search and every propagated candidate is one such
 // call, so it is most of the refinement's time. On CPU float tensors each
-// source is one streaming pass: rows are projected and sampled
+// source is one streaming pass per band of 64 rows (bands in parallel, so
+// one source uses every thread): rows are projected and sampled
 // (bilinearly) into a ring as the window reaches them, the window's column
 // sums move down with it, and only the NCC and its flags are written,
 // instead of some twenty LibTorch operations that each write a full-size
@@ -47,5 +48,28 @@ SurfaceCorrelation CorrelateAlongSurfaceByOps(const torch::Tensor& source, const
                                               const torch::Tensor& reference_var, const torch::Tensor& a,
                                               const torch::Tensor& b, const torch::Tensor& surface,
                                               int64_t radius, double margin);
+
+// The refinement's score of a surface: per reference pixel, the mean over
+// the sources `weights` ([B,N,H,W], 0 or 1) selects of their NCC, a selected
+// source whose match does not count (ok false) counting -1; -1 where no
+// source is selected. [B,1,H,W]. The same as CombineSources of
+// CorrelateAlongSurface, but on CPU float tensors without writing any
+// per-source map: each band of rows sums its sources' NCC at once, and a
+// source no pixel of the band selects is not sampled there.
+torch::Tensor ScoreAlongSurface(const torch::Tensor& source, const torch::Tensor& reference,
+                                const torch::Tensor& reference_mean, const torch::Tensor& reference_var,
+                                const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& surface,
+                                const torch::Tensor& weights, int64_t radius, double margin);
+
+// The same by LibTorch operations (CorrelateAlongSurfaceByOps, then
+// CombineSources), on any device.
+torch::Tensor ScoreAlongSurfaceByOps(const torch::Tensor& source, const torch::Tensor& reference,
+                                    const torch::Tensor& reference_mean, const torch::Tensor& reference_var,
+                                    const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& surface,
+                                    const torch::Tensor& weights, int64_t radius, double margin);
+
+// The score above from per-source correlations ([B*N,1,H,W] each) and
+// weights [B,N,H,W].
+torch::Tensor CombineSources(const SurfaceCorrelation& correlation, const torch::Tensor& weights);
 
 }  // namespace dispmvs::model

@@ -91,6 +91,69 @@ TEST(SurfaceNccTest, CpuPassEqualsTheOperationsOnImagesSmallerThanTheWindow) {
   EXPECT_LT((fast.ncc - ops.ncc).abs().masked_select(both).max().item<float>(), 2e-4);
 }
 
+// Taller images run as bands of 64 rows, each with its own sums: the same
+// as the operations over the band borders, and the same bits whatever the
+// number of threads.
+TEST(SurfaceNccTest, BandsEqualTheOperationsAndDoNotDependOnThreads) {
+  const Inputs in = MakeInputs(/*radius=*/3, /*h=*/150, /*w=*/41);
+  const int threads = at::get_num_threads();
+  torch::set_num_threads(1);
+  const SurfaceCorrelation one = CorrelateAlongSurface(in.source, in.reference, in.reference_mean,
+                                                       in.reference_var, in.a, in.b, in.surface, 3, 3);
+  torch::set_num_threads(2);
+  const SurfaceCorrelation two = CorrelateAlongSurface(in.source, in.reference, in.reference_mean,
+                                                       in.reference_var, in.a, in.b, in.surface, 3, 3);
+  torch::set_num_threads(threads);
+  EXPECT_TRUE(torch::equal(one.ncc, two.ncc));
+  EXPECT_TRUE(torch::equal(one.ok, two.ok));
+  const SurfaceCorrelation ops = CorrelateAlongSurfaceByOps(in.source, in.reference, in.reference_mean,
+                                                            in.reference_var, in.a, in.b, in.surface, 3, 3);
+  EXPECT_LE((one.ok != ops.ok).sum().item<int64_t>(), 3);
+  const torch::Tensor both = one.ok & ops.ok;
+  EXPECT_GT(both.narrow(2, 60, 10).sum().item<int64_t>(), 0);  // rows about the first band border count
+  EXPECT_LT((one.ncc - ops.ncc).abs().masked_select(both).max().item<float>(), 2e-4);
+}
+
+// The score of a surface without per-source maps: the weighted mean of the
+// selected sources' NCC (-1 for one that does not count), -1 where none is
+// selected, as the operations give it; a source no pixel of a band selects
+// is skipped there without changing anything.
+TEST(SurfaceNccTest, ScoreEqualsTheCombinedCorrelations) {
+  const Inputs in = MakeInputs(/*radius=*/3, /*h=*/150, /*w=*/41);
+  const int64_t b = 2, n = 3, h = 150, w = 41;
+  torch::manual_seed(5);
+  torch::Tensor weights = (torch::rand({b, n, h, w}) > 0.4).to(torch::kFloat32);
+  weights.index_put_({0, 1, torch::indexing::Slice(64, 128)}, 0.0);  // source 1 unselected in a whole band
+  weights.index_put_({1, torch::indexing::Slice(), torch::indexing::Slice(10, 12)}, 0.0);  // no source at all
+  const torch::Tensor fast = ScoreAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a,
+                                               in.b, in.surface, weights, 3, 3);
+  ASSERT_EQ(fast.sizes(), torch::IntArrayRef({b, 1, h, w}));
+  const torch::Tensor from_cpu = CombineSources(
+      CorrelateAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a, in.b, in.surface, 3, 3),
+      weights);
+  EXPECT_LT((fast - from_cpu).abs().max().item<float>(), 1e-6);
+  const torch::Tensor ops = ScoreAlongSurfaceByOps(in.source, in.reference, in.reference_mean, in.reference_var,
+                                                   in.a, in.b, in.surface, weights, 3, 3);
+  // Where an ok flag flips with the last bit, one source's term moves to -1.
+  EXPECT_LE(((fast - ops).abs() > 2e-4).sum().item<int64_t>(), 3);
+  EXPECT_TRUE(torch::equal(fast.narrow(0, 1, 1).narrow(2, 10, 2), torch::full({1, 1, 2, w}, -1.0f)));
+  // By hand at one pixel with two sources selected.
+  const int64_t i = 100, j = 20;
+  const SurfaceCorrelation c = CorrelateAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var,
+                                                     in.a, in.b, in.surface, 3, 3);
+  double sum = 0, count = 0;
+  for (int64_t s = 0; s < n; ++s) {
+    if (weights[1][s][i][j].item<float>() == 0) continue;
+    sum += c.ok[n + s][0][i][j].item<bool>() ? c.ncc[n + s][0][i][j].item<float>() : -1.0;
+    count += 1;
+  }
+  ASSERT_GT(count, 0);
+  EXPECT_NEAR(fast[1][0][i][j].item<float>(), sum / count, 1e-6);
+  EXPECT_THROW(ScoreAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a, in.b,
+                                 in.surface, weights.narrow(1, 0, 2), 3, 3),
+               std::invalid_argument);
+}
+
 TEST(SurfaceNccTest, RefusesMismatchedShapes) {
   const Inputs in = MakeInputs(2);
   EXPECT_THROW(CorrelateAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a, in.b,

@@ -57,6 +57,7 @@ PhotometryRanges EasierPhotometry(const PhotometryRanges& r, double d) {
   out.white_balance_jitter = d * r.white_balance_jitter;
   out.noise_sigma_max = d * r.noise_sigma_max;
   out.blur_sigma_max = d * r.blur_sigma_max;
+  out.vignetting_max = d * r.vignetting_max;
   return out;
 }
 
@@ -87,7 +88,7 @@ void SynthConfig::Check() const {
   if (!(ph.gain_min > 0 && ph.gain_max >= ph.gain_min && ph.gain_max < 100 && ph.gamma_min > 0.1 &&
         ph.gamma_max >= ph.gamma_min && ph.gamma_max < 10 && ph.white_balance_jitter >= 0 &&
         ph.white_balance_jitter < 1 && ph.noise_sigma_max >= 0 && ph.noise_sigma_max < 1 &&
-        ph.blur_sigma_max >= 0 && ph.blur_sigma_max <= 10)) {
+        ph.blur_sigma_max >= 0 && ph.blur_sigma_max <= 10 && ph.vignetting_max >= 0 && ph.vignetting_max <= 0.9)) {
     fail("photometry ranges out of bounds");
   }
   if (dtype != torch::kFloat && dtype != torch::kDouble) fail("dtype must be float32 or float64");

@@ -36,7 +36,7 @@ torch::Tensor GaussianBlur(const torch::Tensor& image, double sigma) {
 void ViewPhotometry::Check() const {
   const bool ok = gain > 0 && gain < 100 && gamma > 0.1 && gamma < 10 && noise_sigma >= 0 &&
                   noise_sigma < 1 && blur_sigma >= 0 && blur_sigma <= 10 && white_balance[0] > 0 &&
-                  white_balance[1] > 0 && white_balance[2] > 0;
+                  white_balance[1] > 0 && white_balance[2] > 0 && vignetting >= 0 && vignetting <= 0.9;
   if (!ok) throw std::invalid_argument("ViewPhotometry: value out of range");
 }
 
@@ -48,7 +48,21 @@ ViewPhotometry RandomPhotometry(const PhotometryRanges& ranges, Rng& rng) {
   p.noise_sigma = rng.Uniform(0, ranges.noise_sigma_max);
   p.blur_sigma = rng.Uniform(0, ranges.blur_sigma_max);
   p.noise_seed = static_cast<uint32_t>(rng.NextU64() >> 32);
+  // Drawn last and only when enabled: without it every other draw, and so
+  // every scene, is what it was before the knob existed.
+  if (ranges.vignetting_max > 0) p.vignetting = rng.Uniform(0, ranges.vignetting_max);
   return p;
+}
+
+PhotometryRanges WidePhotometry() {
+  PhotometryRanges r;
+  r.gain_min = 0.5;
+  r.gain_max = 2.0;
+  r.white_balance_jitter = 0.15;
+  r.gamma_min = 0.7;
+  r.gamma_max = 1.4;
+  r.vignetting_max = 0.4;
+  return r;
 }
 
 torch::Tensor ShadeLambertian(const torch::Tensor& albedo, const torch::Tensor& normal, const Vec3& light,
@@ -69,6 +83,15 @@ torch::Tensor ApplyPhotometry(const torch::Tensor& radiance, const ViewPhotometr
   if (photometry.blur_sigma > 0.05) x = GaussianBlur(x, photometry.blur_sigma);
   const auto& wb = photometry.white_balance;
   x = x * (torch::tensor({wb[0], wb[1], wb[2]}, torch::kDouble).to(x.options()).view({3, 1, 1}) * photometry.gain);
+  if (photometry.vignetting > 0) {
+    // rho^2 about the centre of the pixel grid ((w - 1) / 2, (h - 1) / 2), 1 at the corner pixels' centres.
+    const int64_t h = x.size(1), w = x.size(2);
+    const double cy = 0.5 * static_cast<double>(h - 1), cx = 0.5 * static_cast<double>(w - 1);
+    const double corner2 = std::max(cx * cx + cy * cy, 1e-12);
+    const torch::Tensor dy = torch::arange(h, x.options()).sub(cy).view({h, 1});
+    const torch::Tensor dx = torch::arange(w, x.options()).sub(cx).view({1, w});
+    x = x * (1.0 - photometry.vignetting * (dy * dy + dx * dx) / corner2).unsqueeze(0);
+  }
   if (photometry.noise_sigma > 0) {
     // Noise keyed by (pixel, channel) and the view's seed: reproducible on any device.
     const int64_t h = x.size(1), w = x.size(2);

@@ -7,8 +7,9 @@
 // optical blur, sensor noise and the tone curve (gamma). Those differences
 // are what a learned matcher must see through; identical pixel values across
 // views would let it cheat.
-// Order, as in a camera: blur (optics) -> gain (exposure) -> additive
-// Gaussian noise (sensor) -> clamp to [0, 1] -> gamma (tone curve).
+// Order, as in a camera: blur (optics) -> gain (exposure) and vignetting
+// (the lens's radial fall-off) -> additive Gaussian noise (sensor) -> clamp
+// to [0, 1] -> gamma (tone curve).
 
 #include <torch/torch.h>
 
@@ -28,6 +29,11 @@ struct ViewPhotometry {
   double noise_sigma = 0.0;                    // std of the additive noise (image units)
   double blur_sigma = 0.0;                     // Gaussian blur std in pixels (0: none)
   uint32_t noise_seed = 0;
+  // Radial fall-off: radiance x (1 - vignetting rho^2), rho the distance from
+  // the image centre over the half-diagonal (so the corners lose `vignetting`).
+  // Real pairs see the same surface at different image radii, so its
+  // brightness differs between views by up to this much. In [0, 0.9].
+  double vignetting = 0.0;
 
   void Check() const;  // throws std::invalid_argument on values outside sane ranges
 };
@@ -39,7 +45,16 @@ struct PhotometryRanges {
   double gamma_min = 0.8, gamma_max = 1.25;
   double noise_sigma_max = 0.02;
   double blur_sigma_max = 0.8;
+  // Drawn uniformly in [0, max] per view. 0 (the default) draws nothing, so
+  // scenes are exactly those of a configuration without vignetting.
+  double vignetting_max = 0.0;
 };
+
+// Wider per-view differences than the defaults, as between two photographs
+// taken minutes apart or by two cameras: exposure 0.5-2x, white balance
+// +-15 % per channel, tone curve gamma 0.7-1.4 and vignetting up to 0.4
+// (noise and blur as the defaults). The training knob `--photometry wide`.
+PhotometryRanges WidePhotometry();
 
 ViewPhotometry RandomPhotometry(const PhotometryRanges& ranges, Rng& rng);
 

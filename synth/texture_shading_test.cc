@@ -265,6 +265,66 @@ TEST(ShadingTest, RandomPhotometryStaysInItsRanges) {
   }
 }
 
+// Vignetting by hand: radiance x (1 - v rho^2) before noise and gamma, rho
+// the distance from the grid's centre over the corner pixels' distance.
+TEST(ShadingTest, VignettingByHand) {
+  const torch::Tensor radiance = torch::rand({3, 7, 10}, torch::kDouble);
+  ViewPhotometry p;
+  p.gain = 1.1;
+  p.gamma = 1.3;
+  p.vignetting = 0.4;
+  const torch::Tensor image = ApplyPhotometry(radiance, p);
+  const double corner = std::hypot(4.5, 3.0);
+  for (int c = 0; c < 3; ++c) {
+    for (int i = 0; i < 7; ++i) {
+      for (int j = 0; j < 10; ++j) {
+        const double rho = std::hypot(j - 4.5, i - 3.0) / corner;
+        const double x = std::clamp(radiance[c][i][j].item<double>() * 1.1 * (1 - 0.4 * rho * rho), 0.0, 1.0);
+        EXPECT_NEAR(image[c][i][j].item<double>(), std::pow(x, 1 / 1.3), 1e-12);
+      }
+    }
+  }
+  // The corners lose exactly v; a flat image keeps its centre row's middle.
+  const torch::Tensor flat = ApplyPhotometry(torch::full({3, 9, 9}, 0.5, torch::kDouble), ViewPhotometry{1, {1, 1, 1}, 1, 0, 0, 0, 0.4});
+  EXPECT_NEAR(flat[1][0][0].item<double>(), 0.5 * 0.6, 1e-12);
+  EXPECT_NEAR(flat[1][8][8].item<double>(), 0.5 * 0.6, 1e-12);
+  EXPECT_NEAR(flat[1][4][4].item<double>(), 0.5, 1e-12);
+  p.vignetting = 0.95;
+  EXPECT_THROW(ApplyPhotometry(radiance, p), std::invalid_argument);
+}
+
+// Vignetting is drawn only when enabled, after every other draw: with it off
+// the draws (so the scenes) are those of before the knob; with it on a
+// view's other values are unchanged and its vignetting is in range.
+TEST(ShadingTest, VignettingDrawLeavesTheOtherDraws) {
+  PhotometryRanges off;
+  PhotometryRanges on = off;
+  on.vignetting_max = 0.4;
+  Rng a(11), b(11);
+  for (int k = 0; k < 50; ++k) {
+    Rng a_view = a.Fork(static_cast<uint64_t>(k)), b_view = b.Fork(static_cast<uint64_t>(k));
+    const ViewPhotometry p = RandomPhotometry(off, a_view), q = RandomPhotometry(on, b_view);
+    EXPECT_EQ(p.vignetting, 0.0);
+    EXPECT_GE(q.vignetting, 0.0);
+    EXPECT_LE(q.vignetting, 0.4);
+    EXPECT_EQ(p.gain, q.gain);
+    EXPECT_EQ(p.gamma, q.gamma);
+    EXPECT_EQ(p.white_balance, q.white_balance);
+    EXPECT_EQ(p.noise_seed, q.noise_seed);
+  }
+  // The wide ranges contain the defaults and pass the generator's checks.
+  const PhotometryRanges wide = WidePhotometry();
+  EXPECT_LE(wide.gain_min, off.gain_min);
+  EXPECT_GE(wide.gain_max, off.gain_max);
+  EXPECT_GE(wide.white_balance_jitter, off.white_balance_jitter);
+  EXPECT_GT(wide.vignetting_max, 0.0);
+  SynthConfig config;
+  config.photometry = wide;
+  EXPECT_NO_THROW(config.Check());
+  config.photometry.vignetting_max = 1.0;
+  EXPECT_THROW(config.Check(), std::invalid_argument);
+}
+
 // 1 - |(t mod 2) - 1| in plain double arithmetic.
 double MirrorReference(double t) {
   const double m = t - 2.0 * std::floor(t / 2.0);

@@ -138,6 +138,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "difficulty_ramp_steps") return "0";
   if (key == "lr_warmup_steps") return "0";
   if (key == "source_counts") return "";
+  if (key == "photometry") return "default";
   return std::nullopt;
 }
 
@@ -232,7 +233,8 @@ Settings RunSettings(const TrainOptions& o) {
           {"train_coarse_iterations", std::to_string(o.train_coarse_iterations)},
           {"difficulty_start", std::to_string(o.difficulty_start)},
           {"difficulty_ramp_steps", std::to_string(o.difficulty_ramp_steps)},
-          {"source_counts", JoinCounts(o.source_counts)}};
+          {"source_counts", JoinCounts(o.source_counts)},
+          {"photometry", o.photometry}};
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,

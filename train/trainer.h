@@ -105,6 +105,11 @@ struct TrainOptions {
   // trained only with num_sources sources rarely sees one. Empty = every
   // step uses all num_sources. Each count in [1, num_sources].
   std::vector<int64_t> source_counts;
+  // Per-view photometry of the generated training scenes: "default" (the
+  // generator's PhotometryRanges) or "wide" (synth::WidePhotometry: larger
+  // exposure, white-balance and tone-curve differences and vignetting, as
+  // between real photographs). Validation scenes keep the defaults.
+  std::string photometry = "default";
   // GRU iterations of the coarse stage in training steps (0 = the config's):
   // cheaper steps; validation and the saved weights keep the config's.
   int64_t train_coarse_iterations = 0;

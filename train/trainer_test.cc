@@ -362,6 +362,37 @@ TEST(TrainerV2Test, SourceCountsDrawFewerSourcesAsASubsetAndAreARunSetting) {
   EXPECT_THROW(Train(o, again), std::runtime_error);
 }
 
+// --photometry wide changes the training scenes' images, not their
+// geometry, and is a run setting.
+TEST(TrainerV2Test, WidePhotometryChangesTrainingImagesOnly) {
+  TempDir tmp;
+  TrainOptions o = TinyV2Options(tmp.path() / "wide", 2);
+  fs::create_directories(o.checkpoint_dir);
+  std::ostringstream console;
+  internal::Logger log(console, tmp.path() / "log.txt");
+  TrainOptions wide = o;
+  wide.photometry = "wide";
+  internal::TrainingSamples plain_samples(o, torch::kCPU, log);
+  internal::TrainingSamples wide_samples(wide, torch::kCPU, log);
+  const auto plain = plain_samples.ForStep(0);
+  const auto widened = wide_samples.ForStep(0);
+  ASSERT_EQ(plain.size(), widened.size());
+  for (size_t i = 0; i < plain.size(); ++i) {
+    EXPECT_TRUE(torch::equal(plain[i].depths, widened[i].depths));
+    EXPECT_TRUE(torch::equal(plain[i].world_to_camera, widened[i].world_to_camera));
+    EXPECT_FALSE(torch::equal(plain[i].images, widened[i].images));
+  }
+  EXPECT_NE(console.str().find("photometry: wide"), std::string::npos);
+
+  std::ostringstream train_log;
+  Train(wide, train_log);
+  EXPECT_NE(train_log.str().find("step 2/2  loss "), std::string::npos) << train_log.str();
+  wide.steps = 3;
+  wide.photometry = "default";
+  std::ostringstream again;
+  EXPECT_THROW(Train(wide, again), std::runtime_error);
+}
+
 TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnce) {
   TempDir tmp;
   std::ostringstream log;
@@ -570,6 +601,9 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   ExpectRejected(o, "source_counts");
   o.source_counts = {0};
   ExpectRejected(o, "source_counts");
+  o = good;
+  o.photometry = "vivid";
+  ExpectRejected(o, "photometry");
   o = good;
   o.depth_loss = "l2";
   ExpectRejected(o, "depth_loss");

@@ -9,6 +9,7 @@
 
 #include "synth/photo_folder.h"
 #include "synth/rng.h"
+#include "synth/shading.h"
 
 namespace dispmvs::train::internal {
 namespace {
@@ -131,6 +132,11 @@ synth::SynthSample TrainingSample(const TrainOptions& options, const synth::Synt
 
 TrainingSamples::TrainingSamples(const TrainOptions& options, torch::Device device, Logger& log)
     : options_(options), device_(device), synth_config_(SynthConfigFor(options)) {
+  // Training scenes only: validation and the confidence fit keep SynthConfigFor's defaults.
+  if (options.photometry == "wide") {
+    synth_config_.photometry = synth::WidePhotometry();
+    log.Line("photometry: wide (exposure 0.5-2x, white balance +-15 %, gamma 0.7-1.4, vignetting <= 0.4)");
+  }
   if (!options.texture_dir.empty()) {
     std::ostringstream warnings;
     synth_config_.photos = std::make_shared<const synth::PhotoSet>(
