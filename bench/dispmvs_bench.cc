@@ -92,7 +92,7 @@ struct Options {
   int64_t warmup = 1;
   int64_t reps = 3;
   bool refine = false;  // --refinement ncc
-  dispmvs::model::PhotometricRefinementOptions refinement;  // --refine_propagation_rounds
+  dispmvs::model::PhotometricRefinementOptions refinement;  // --refine_propagation_rounds, _levels
 };
 
 constexpr const char* kUsage =
@@ -114,7 +114,9 @@ constexpr const char* kUsage =
     "  --refinement none|ncc    ncc: each pass also runs the photometric refinement of\n"
     "                           dispmvs_colmap's default, timed as the 'refine' column (none)\n"
     "  --refine_propagation_rounds K  with ncc: the refinement's propagation rounds\n"
-    "                           (dispmvs_colmap --refine_propagation_rounds) (0)\n";
+    "                           (dispmvs_colmap --refine_propagation_rounds) (0)\n"
+    "  --refine_propagation_levels K  with ncc: jumps per round (dispmvs_colmap\n"
+    "                           --refine_propagation_levels) (4)\n";
 
 std::vector<std::string> SplitComma(const std::string& s) {
   std::vector<std::string> out;
@@ -196,6 +198,8 @@ Options ParseArgs(int argc, char** argv) {
       o.refine = value == "ncc";
     } else if (flag == "--refine_propagation_rounds") {
       o.refinement.propagation_rounds = ParseInteger(flag, value, 0, 16);
+    } else if (flag == "--refine_propagation_levels") {
+      o.refinement.propagation_levels = ParseInteger(flag, value, 1, 16);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

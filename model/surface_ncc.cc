@@ -74,15 +74,19 @@ struct PlaneSampler {
     const float inverse_z = in_front ? 1.0f / pz : 0.0f;
     const float x = px * inverse_z, y = py * inverse_z;
     *inside = in_front && std::abs(x - half_w) <= limit_x && std::abs(y - half_h) <= limit_y;
-    if (!(std::isfinite(x) && std::isfinite(y))) return 0.0f;
-    const float x0f = std::floor(x), y0f = std::floor(y);
-    const float fx = x - x0f, fy = y - y0f;
-    if (x0f >= 0 && y0f >= 0 && x0f + 1 < static_cast<float>(w) && y0f + 1 < static_cast<float>(h)) {
-      const float* row = source + static_cast<int64_t>(y0f) * w + static_cast<int64_t>(x0f);
+    // Beyond [-1, w) x [-1, h) no pixel of the image is in reach (and NaN or
+    // infinite coordinates fail the comparisons).
+    if (!(x >= -1.0f && y >= -1.0f && x < static_cast<float>(w) && y < static_cast<float>(h))) return 0.0f;
+    // floor by truncation, exact in this range: std::floor is a library call
+    // on x86-64's baseline instruction set, twice per sample.
+    int64_t x0 = static_cast<int64_t>(x), y0 = static_cast<int64_t>(y);
+    x0 -= static_cast<float>(x0) > x;
+    y0 -= static_cast<float>(y0) > y;
+    const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
+    if (x0 >= 0 && y0 >= 0 && x0 + 1 < w && y0 + 1 < h) {
+      const float* row = source + y0 * w + x0;
       return (1 - fy) * ((1 - fx) * row[0] + fx * row[1]) + fy * ((1 - fx) * row[w] + fx * row[w + 1]);
     }
-    if (x0f < -1 || y0f < -1 || x0f >= static_cast<float>(w) || y0f >= static_cast<float>(h)) return 0.0f;
-    const int64_t x0 = static_cast<int64_t>(x0f), y0 = static_cast<int64_t>(y0f);
     const auto at = [&](int64_t yy, int64_t xx) {
       return (xx >= 0 && xx < w && yy >= 0 && yy < h) ? source[yy * w + xx] : 0.0f;
     };
@@ -98,9 +102,11 @@ struct PlaneSampler {
 // leaves no drift), and each output row's window sums are a running sum
 // along those columns. Nothing of full size is written but the NCC and the
 // flags; ncc and ok point at row_begin's first pixel.
+// `needed` (null: every pixel), like ncc from row_begin: the pixels whose NCC
+// is wanted; the others get ncc 0, ok false without the arithmetic.
 void CorrelateRows(const PlaneSampler& sampler, const float* reference, const float* reference_mean,
                    const float* reference_var, int64_t r, int64_t row_begin, int64_t row_end, float* ncc,
-                   bool* ok) {
+                   bool* ok, const float* needed) {
   const int64_t h = sampler.h, w = sampler.w;
   const int64_t ring = 2 * r + 2;
   std::vector<float> values(static_cast<size_t>(ring * w));
@@ -129,12 +135,21 @@ void CorrelateRows(const PlaneSampler& sampler, const float* reference, const fl
       col_rv[j] += sign * static_cast<double>(ref_row[j] * v[j]);
     }
   };
+  // 1 / (window columns inside the image) per column: the window's pixel
+  // count is that times the rows', without a division per pixel.
+  std::vector<double> inverse_cols(static_cast<size_t>(w));
+  for (int64_t j = 0; j < w; ++j) {
+    inverse_cols[static_cast<size_t>(j)] =
+        1.0 / static_cast<double>(std::min(j + r, w - 1) - std::max<int64_t>(j - r, 0) + 1);
+  }
   for (int64_t k = std::max<int64_t>(row_begin - r, 0); k <= std::min(row_begin + r, h - 1); ++k) take_row(k, 1.0);
   for (int64_t i = row_begin; i < row_end; ++i) {
     const int64_t rows = std::min(i + r, h - 1) - std::max<int64_t>(i - r, 0) + 1;
+    const double inverse_rows = 1.0 / static_cast<double>(rows);
     const char* in = inside.data() + (i % ring) * w;
     float* ncc_row = ncc + (i - row_begin) * w;
     bool* ok_row = ok + (i - row_begin) * w;
+    const float* needed_row = needed ? needed + (i - row_begin) * w : nullptr;
     double s_v = 0, s_vv = 0, s_rv = 0;
     for (int64_t j = 0; j <= std::min(r, w - 1); ++j) {
       s_v += col_v[j];
@@ -142,14 +157,18 @@ void CorrelateRows(const PlaneSampler& sampler, const float* reference, const fl
       s_rv += col_rv[j];
     }
     for (int64_t j = 0; j < w; ++j) {
-      const int64_t cols = std::min(j + r, w - 1) - std::max<int64_t>(j - r, 0) + 1;
-      const double inverse_count = 1.0 / static_cast<double>(rows * cols);
-      const int64_t p = i * w + j;
-      const float s_mean = static_cast<float>(s_v * inverse_count);
-      const float s_var = std::max(static_cast<float>(s_vv * inverse_count) - s_mean * s_mean, 0.0f);
-      const float covariance = static_cast<float>(s_rv * inverse_count) - reference_mean[p] * s_mean;
-      ncc_row[j] = covariance / std::sqrt(std::max(reference_var[p] * s_var, 1e-12f));
-      ok_row[j] = in[j] && s_var > 1e-10f;
+      if (needed_row == nullptr || needed_row[j] != 0) {
+        const double inverse_count = inverse_rows * inverse_cols[static_cast<size_t>(j)];
+        const int64_t p = i * w + j;
+        const float s_mean = static_cast<float>(s_v * inverse_count);
+        const float s_var = std::max(static_cast<float>(s_vv * inverse_count) - s_mean * s_mean, 0.0f);
+        const float covariance = static_cast<float>(s_rv * inverse_count) - reference_mean[p] * s_mean;
+        ncc_row[j] = covariance / std::sqrt(std::max(reference_var[p] * s_var, 1e-12f));
+        ok_row[j] = in[j] && s_var > 1e-10f;
+      } else {
+        ncc_row[j] = 0.0f;
+        ok_row[j] = false;
+      }
       if (j + r + 1 < w) {
         s_v += col_v[j + r + 1];
         s_vv += col_vv[j + r + 1];
@@ -218,10 +237,11 @@ struct CpuPlanes {
                         half_h - static_cast<float>(margin)};
   }
 
-  void Correlate(int64_t i, int64_t radius, int64_t row_begin, int64_t row_end, float* ncc, bool* ok) const {
+  void Correlate(int64_t i, int64_t radius, int64_t row_begin, int64_t row_end, float* ncc, bool* ok,
+                 const float* needed = nullptr) const {
     const int64_t hw = h * w;
     CorrelateRows(Sampler(i), ref.data_ptr<float>() + i * hw, mean.data_ptr<float>() + i * hw,
-                  var.data_ptr<float>() + i * hw, radius, row_begin, row_end, ncc, ok);
+                  var.data_ptr<float>() + i * hw, radius, row_begin, row_end, ncc, ok, needed);
   }
 };
 
@@ -273,7 +293,7 @@ torch::Tensor ScoreAlongSurfaceCpu(const torch::Tensor& source, const torch::Ten
         bool any = false;
         for (int64_t p = 0; p < count && !any; ++p) any = wgt[p] != 0;
         if (!any) continue;  // no pixel of the band counts this source
-        in.Correlate(item * in.n + s, radius, row_begin, row_end, ncc.data(), ok.get());
+        in.Correlate(item * in.n + s, radius, row_begin, row_end, ncc.data(), ok.get(), wgt);
         for (int64_t p = 0; p < count; ++p) {
           sum[p] += wgt[p] * (ok[p] ? ncc[p] : -1.0f);
           weight_sum[p] += wgt[p];

@@ -20,6 +20,7 @@
 #include <string>
 
 #include "synth/photo_folder.h"
+#include "synth/shading.h"
 #include "synth/workspace_writer.h"
 #include "src/program_main.h"
 #include "src/program_options.h"
@@ -38,6 +39,7 @@ struct Options {
   uint64_t seed = 0;
   std::string rig = "random";
   std::string texture_dir;
+  std::string photometry = "default";
   dispmvs::synth::SynthWorkspaceOptions workspace;
 };
 
@@ -74,6 +76,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("difficulty", po::value<double>(&config.difficulty)->default_value(config.difficulty, "1"),
        "Scene difficulty in [0, 1]: 1 is the full generator; lower values shrink the baselines, "
        "remove occluders, soften the light and narrow the per-view photometry.")
+      ("photometry", po::value<std::string>(&options.photometry)->default_value(options.photometry),
+       "Per-view camera response: default, or wide (exposure 0.5-2x, white balance +-15 %, gamma "
+       "0.7-1.4 and vignetting up to 0.4 between views, as between real photographs; "
+       "dispmvs_train --photometry wide).")
       ("ply_stride", po::value<int>(&options.workspace.ply_stride)->default_value(options.workspace.ply_stride),
        "ground_truth/points.ply keeps every n-th depth sample per row and column.");
 
@@ -82,6 +88,11 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   if (values.count("output_path") == 0) throw std::invalid_argument("--output_path is required (see --help)");
   if (values.count("num_scenes") == 0) throw std::invalid_argument("--num_scenes is required (see --help)");
   if (options.num_scenes < 1) throw std::invalid_argument("--num_scenes must be >= 1");
+  if (options.photometry == "wide") {
+    config.photometry = dispmvs::synth::WidePhotometry();
+  } else if (options.photometry != "default") {
+    throw std::invalid_argument("--photometry must be default or wide, got '" + options.photometry + "'");
+  }
   config = dispmvs::synth::ConfigForRig(options.rig, config);
   if (!options.texture_dir.empty()) {
     config.photos = std::make_shared<const dispmvs::synth::PhotoSet>(
