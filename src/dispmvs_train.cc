@@ -81,10 +81,10 @@ options (default):
                               uniformly, a random subset of the sample's --sources), e.g. 1,2,5,5
                               mixes two-view and three-view samples into five-source training
                               (all --sources)
-  --photometry P              training: per-view photometry of the generated scenes, default or
+  --photometry P              training: per-view photometry of the generated scenes, default,
                               wide (exposure 0.5-2x, white balance +-15 %, gamma 0.7-1.4,
-                              vignetting up to 0.4, as between real photographs); validation
-                              keeps the defaults (default)
+                              vignetting up to 0.4, as between real photographs) or mixed (half
+                              the scenes each); validation keeps the defaults (default)
   --batch B                   samples per step (1)
   --steps S                   total steps (1000)
   --lr LR                     Adam learning rate (2e-4)

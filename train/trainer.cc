@@ -118,8 +118,8 @@ void TrainOptions::Check(bool for_training) const {
            std::to_string(count));
     }
   }
-  if (photometry != "default" && photometry != "wide") {
-    fail("photometry must be default or wide, got '" + photometry + "'");
+  if (photometry != "default" && photometry != "wide" && photometry != "mixed") {
+    fail("photometry must be default, wide or mixed, got '" + photometry + "'");
   }
   if (!(photo_probability >= 0 && photo_probability <= 1)) {
     fail("photo_probability must be in [0, 1], got " + std::to_string(photo_probability));

@@ -108,7 +108,8 @@ struct TrainOptions {
   // Per-view photometry of the generated training scenes: "default" (the
   // generator's PhotometryRanges) or "wide" (synth::WidePhotometry: larger
   // exposure, white-balance and tone-curve differences and vignetting, as
-  // between real photographs). Validation scenes keep the defaults.
+  // between real photographs) or "mixed" (each scene one of the two, by its
+  // seed). Validation scenes keep the defaults.
   std::string photometry = "default";
   // GRU iterations of the coarse stage in training steps (0 = the config's):
   // cheaper steps; validation and the saved weights keep the config's.

@@ -383,6 +383,27 @@ TEST(TrainerV2Test, WidePhotometryChangesTrainingImagesOnly) {
     EXPECT_FALSE(torch::equal(plain[i].images, widened[i].images));
   }
   EXPECT_NE(console.str().find("photometry: wide"), std::string::npos);
+  // "mixed": every scene is the default's or the wide one's, and both occur.
+  TrainOptions mixed = o;
+  mixed.photometry = "mixed";
+  mixed.scene_reuse = 1;
+  TrainOptions plain_one = o, wide_one = wide;
+  plain_one.scene_reuse = wide_one.scene_reuse = 1;
+  internal::TrainingSamples mixed_samples(mixed, torch::kCPU, log);
+  internal::TrainingSamples plain_each(plain_one, torch::kCPU, log);
+  internal::TrainingSamples wide_each(wide_one, torch::kCPU, log);
+  int as_default = 0, as_wide = 0;
+  for (int64_t step = 0; step < 8; ++step) {
+    const auto m = mixed_samples.ForStep(step), d = plain_each.ForStep(step), v = wide_each.ForStep(step);
+    for (size_t i = 0; i < m.size(); ++i) {
+      const bool is_default = torch::equal(m[i].images, d[i].images), is_wide = torch::equal(m[i].images, v[i].images);
+      EXPECT_NE(is_default, is_wide) << "step " << step;
+      as_default += is_default;
+      as_wide += is_wide;
+    }
+  }
+  EXPECT_GT(as_default, 0);
+  EXPECT_GT(as_wide, 0);
 
   std::ostringstream train_log;
   Train(wide, train_log);

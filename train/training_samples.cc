@@ -125,6 +125,13 @@ synth::SynthSample TrainingSample(const TrainOptions& options, const synth::Synt
       return LoadMvsnetSample(mvsnet->dataset, mvsnet->views[*view], mvsnet->sample_options, device);
     }
   }
+  // "mixed": half the scenes (by their seed) get the wide photometry, the
+  // others the defaults; the geometry is the same either way.
+  if (options.photometry == "mixed" && (synth::SplitMix64(seed ^ 0x70686f746f6dULL) >> 63) != 0) {
+    synth::SynthConfig wide = synth_config;
+    wide.photometry = synth::WidePhotometry();
+    return GenerateUsableSample(wide, seed, device);
+  }
   return GenerateUsableSample(synth_config, seed, device);
 }
 
@@ -136,6 +143,8 @@ TrainingSamples::TrainingSamples(const TrainOptions& options, torch::Device devi
   if (options.photometry == "wide") {
     synth_config_.photometry = synth::WidePhotometry();
     log.Line("photometry: wide (exposure 0.5-2x, white balance +-15 %, gamma 0.7-1.4, vignetting <= 0.4)");
+  } else if (options.photometry == "mixed") {
+    log.Line("photometry: mixed (half the generated scenes wide, half the defaults)");
   }
   if (!options.texture_dir.empty()) {
     std::ostringstream warnings;
