@@ -227,15 +227,11 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   // pixels are sampled at their own matches, which lie about as far from it
   // as they lie from the reference pixel).
   const double margin = static_cast<double>(r);
-  // Every source's NCC where each reference pixel is at the inverse depth
-  // `surface` ([B,1,H,W]), and whether it counts ([B,N,H,W] each).
-  const auto correlate = [&](const torch::Tensor& surface) {
-    const SurfaceCorrelation c =
-        CorrelateAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, surface, r, margin);
-    return std::make_pair(c.ncc.view({b, n, h, w}), c.ok.view({b, n, h, w}));
-  };
-  const auto [ncc_at_start, ok_at_start] = correlate(w0);
-  const torch::Tensor weights = BetterHalfOfSources(ncc_at_start, ok_at_start);
+  // Every source's NCC at the network's depth, and whether it counts.
+  const SurfaceCorrelation at_start =
+      CorrelateAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, w0, r, margin);
+  const torch::Tensor weights =
+      BetterHalfOfSources(at_start.ncc.view({b, n, h, w}), at_start.ok.view({b, n, h, w}));
   // A chosen source whose window leaves its image at some hypothesis scores
   // -1 there (the worst correlation): the search does not wander off the
   // sources it was judged on (CombineSources, ScoreAlongSurface).
@@ -247,8 +243,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   std::vector<torch::Tensor> scores;
   for (int64_t k = -options.steps; k <= options.steps; ++k) {
     if (k == 0) {
-      scores.push_back(CombineSources({ncc_at_start.reshape({b * n, 1, h, w}), ok_at_start.reshape({b * n, 1, h, w})},
-                                      weights));
+      scores.push_back(CombineSources(at_start, weights));
     } else {
       scores.push_back(surface_score(torch::add(w0, dw, static_cast<double>(k))));
     }

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -38,6 +39,14 @@ void CheckShapes(const torch::Tensor& source, const torch::Tensor& reference,
       surface.size(3) != source.size(3)) {
     fail("surface must be [B,1,H,W] with B dividing source's B*N");
   }
+}
+
+// Whether every tensor is a CPU float32 one: what the hand-written passes take.
+bool AllCpuFloat(std::initializer_list<const torch::Tensor*> tensors) {
+  for (const torch::Tensor* t : tensors) {
+    if (!t->device().is_cpu() || t->scalar_type() != torch::kFloat32) return false;
+  }
+  return true;
 }
 
 void CheckWeights(const torch::Tensor& weights, const torch::Tensor& source, const torch::Tensor& surface) {
@@ -359,11 +368,7 @@ SurfaceCorrelation CorrelateAlongSurface(const torch::Tensor& source, const torc
                                          const torch::Tensor& b, const torch::Tensor& surface,
                                          int64_t radius, double margin) {
   CheckShapes(source, reference, reference_mean, reference_var, a, b, surface);
-  bool cpu_float = true;
-  for (const torch::Tensor* t : {&source, &reference, &reference_mean, &reference_var, &a, &b, &surface}) {
-    cpu_float = cpu_float && t->device().is_cpu() && t->scalar_type() == torch::kFloat32;
-  }
-  if (cpu_float) {
+  if (AllCpuFloat({&source, &reference, &reference_mean, &reference_var, &a, &b, &surface})) {
     return CorrelateAlongSurfaceCpu(source, reference, reference_mean, reference_var, a, b, surface, radius,
                                     margin);
   }
@@ -376,9 +381,8 @@ torch::Tensor ScoreAlongSurfaceByOps(const torch::Tensor& source, const torch::T
                                     const torch::Tensor& weights, int64_t radius, double margin) {
   CheckShapes(source, reference, reference_mean, reference_var, a, b, surface);
   CheckWeights(weights, source, surface);
-  const SurfaceCorrelation c =
-      CorrelateByOps(source, reference, reference_mean, reference_var, a, b, surface, radius, margin);
-  return CombineSources(c, weights);
+  return CombineSources(
+      CorrelateByOps(source, reference, reference_mean, reference_var, a, b, surface, radius, margin), weights);
 }
 
 torch::Tensor ScoreAlongSurface(const torch::Tensor& source, const torch::Tensor& reference,
@@ -387,16 +391,12 @@ torch::Tensor ScoreAlongSurface(const torch::Tensor& source, const torch::Tensor
                                 const torch::Tensor& weights, int64_t radius, double margin) {
   CheckShapes(source, reference, reference_mean, reference_var, a, b, surface);
   CheckWeights(weights, source, surface);
-  bool cpu_float = true;
-  for (const torch::Tensor* t : {&source, &reference, &reference_mean, &reference_var, &a, &b, &surface, &weights}) {
-    cpu_float = cpu_float && t->device().is_cpu() && t->scalar_type() == torch::kFloat32;
-  }
-  if (cpu_float) {
+  if (AllCpuFloat({&source, &reference, &reference_mean, &reference_var, &a, &b, &surface, &weights})) {
     return ScoreAlongSurfaceCpu(source, reference, reference_mean, reference_var, a, b, surface, weights, radius,
                                 margin);
   }
-  return ScoreAlongSurfaceByOps(source, reference, reference_mean, reference_var, a, b, surface, weights, radius,
-                                margin);
+  return CombineSources(
+      CorrelateByOps(source, reference, reference_mean, reference_var, a, b, surface, radius, margin), weights);
 }
 
 torch::Tensor CombineSources(const SurfaceCorrelation& correlation, const torch::Tensor& weights) {

@@ -284,8 +284,10 @@ TEST(ShadingTest, VignettingByHand) {
       }
     }
   }
-  // The corners lose exactly v; a flat image keeps its centre row's middle.
-  const torch::Tensor flat = ApplyPhotometry(torch::full({3, 9, 9}, 0.5, torch::kDouble), ViewPhotometry{1, {1, 1, 1}, 1, 0, 0, 0, 0.4});
+  // The corners lose exactly v; the centre keeps its value.
+  ViewPhotometry vignetting_only;
+  vignetting_only.vignetting = 0.4;
+  const torch::Tensor flat = ApplyPhotometry(torch::full({3, 9, 9}, 0.5, torch::kDouble), vignetting_only);
   EXPECT_NEAR(flat[1][0][0].item<double>(), 0.5 * 0.6, 1e-12);
   EXPECT_NEAR(flat[1][8][8].item<double>(), 0.5 * 0.6, 1e-12);
   EXPECT_NEAR(flat[1][4][4].item<double>(), 0.5, 1e-12);

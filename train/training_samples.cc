@@ -125,12 +125,14 @@ synth::SynthSample TrainingSample(const TrainOptions& options, const synth::Synt
       return LoadMvsnetSample(mvsnet->dataset, mvsnet->views[*view], mvsnet->sample_options, device);
     }
   }
-  // "mixed": half the scenes (by their seed) get the wide photometry, the
-  // others the defaults; the geometry is the same either way.
-  if (options.photometry == "mixed" && (synth::SplitMix64(seed ^ 0x70686f746f6dULL) >> 63) != 0) {
-    synth::SynthConfig wide = synth_config;
-    wide.photometry = synth::WidePhotometry();
-    return GenerateUsableSample(wide, seed, device);
+  // The photometry setting: "wide" for every scene, "mixed" for half of
+  // them (by their seed); the geometry is the same either way.
+  const bool wide = options.photometry == "wide" ||
+                    (options.photometry == "mixed" && (synth::SplitMix64(seed ^ 0x70686f746f6dULL) >> 63) != 0);
+  if (wide) {
+    synth::SynthConfig wide_config = synth_config;
+    wide_config.photometry = synth::WidePhotometry();
+    return GenerateUsableSample(wide_config, seed, device);
   }
   return GenerateUsableSample(synth_config, seed, device);
 }
@@ -139,9 +141,9 @@ synth::SynthSample TrainingSample(const TrainOptions& options, const synth::Synt
 
 TrainingSamples::TrainingSamples(const TrainOptions& options, torch::Device device, Logger& log)
     : options_(options), device_(device), synth_config_(SynthConfigFor(options)) {
-  // Training scenes only: validation and the confidence fit keep SynthConfigFor's defaults.
+  // Training scenes only (TrainingSample): validation and the confidence
+  // fit keep SynthConfigFor's defaults.
   if (options.photometry == "wide") {
-    synth_config_.photometry = synth::WidePhotometry();
     log.Line("photometry: wide (exposure 0.5-2x, white balance +-15 %, gamma 0.7-1.4, vignetting <= 0.4)");
   } else if (options.photometry == "mixed") {
     log.Line("photometry: mixed (half the generated scenes wide, half the defaults)");
