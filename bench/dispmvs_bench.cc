@@ -113,10 +113,14 @@ constexpr const char* kUsage =
     "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n"
     "  --refinement none|ncc    ncc: each pass also runs the photometric refinement of\n"
     "                           dispmvs_colmap's default, timed as the 'refine' column (none)\n"
+    "  --refine_steps K         with ncc: the search's hypotheses on each side\n"
+    "                           (dispmvs_colmap --refine_steps) (6)\n"
     "  --refine_propagation_rounds K  with ncc: the refinement's propagation rounds\n"
     "                           (dispmvs_colmap --refine_propagation_rounds) (0)\n"
     "  --refine_propagation_levels K  with ncc: jumps per round (dispmvs_colmap\n"
-    "                           --refine_propagation_levels) (4)\n";
+    "                           --refine_propagation_levels) (4)\n"
+    "  --refine_propagation_scale S  with ncc: 1, 2 or 4, the resolution propagation runs\n"
+    "                           at (dispmvs_colmap --refine_propagation_scale) (1)\n";
 
 std::vector<std::string> SplitComma(const std::string& s) {
   std::vector<std::string> out;
@@ -196,10 +200,15 @@ Options ParseArgs(int argc, char** argv) {
         throw std::invalid_argument("--refinement must be none or ncc, got '" + value + "'");
       }
       o.refine = value == "ncc";
+    } else if (flag == "--refine_steps") {
+      o.refinement.steps = ParseInteger(flag, value, 1, 64);
     } else if (flag == "--refine_propagation_rounds") {
       o.refinement.propagation_rounds = ParseInteger(flag, value, 0, 16);
     } else if (flag == "--refine_propagation_levels") {
       o.refinement.propagation_levels = ParseInteger(flag, value, 1, 16);
+    } else if (flag == "--refine_propagation_scale") {
+      o.refinement.propagation_scale = ParseInteger(flag, value, 1, 4);
+      o.refinement.Check();
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

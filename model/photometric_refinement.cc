@@ -1,5 +1,6 @@
 #include "model/photometric_refinement.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -13,6 +14,8 @@
 
 namespace dispmvs::model {
 namespace {
+
+namespace F = torch::nn::functional;
 
 // Per pixel, which sources count: the better half (at least one) of those
 // whose window correlates validly at the network's depth, by that
@@ -121,6 +124,56 @@ void TakeBetterCandidates(const torch::Tensor& candidate, const torch::Tensor& c
   }
 }
 
+// The refinement's input at 1/scale of the resolution, for propagation at
+// propagation_scale: images averaged over scale x scale blocks (rows and
+// columns beyond the last whole block dropped), intrinsics for the
+// pixel-index convention on that grid (full-resolution x lies at
+// (x + 0.5) / scale - 0.5), and the inverse depth averaged over each
+// block's usable pixels (valid where any is).
+struct CoarseInput {
+  torch::Tensor images, intrinsics, depth, valid;
+};
+
+CoarseInput Downsampled(const torch::Tensor& images, const torch::Tensor& intrinsics, const torch::Tensor& w,
+                        const torch::Tensor& usable, int64_t scale) {
+  const int64_t b = images.size(0), v = images.size(1), h = images.size(3), wd = images.size(4);
+  const auto pool = [scale](const torch::Tensor& t) {
+    return F::avg_pool2d(t, F::AvgPool2dFuncOptions(scale).stride(scale));
+  };
+  CoarseInput coarse;
+  coarse.images = pool(images.reshape({b * v, 3, h, wd}));
+  coarse.images = coarse.images.view({b, v, 3, coarse.images.size(2), coarse.images.size(3)});
+  const double inverse = 1.0 / static_cast<double>(scale), shift = 0.5 * inverse - 0.5;
+  const torch::Tensor to_coarse =
+      torch::tensor({inverse, 0.0, shift, 0.0, inverse, shift, 0.0, 0.0, 1.0}, intrinsics.options()).view({3, 3});
+  coarse.intrinsics = torch::matmul(to_coarse, intrinsics);
+  const torch::Tensor m = usable.to(w.scalar_type());
+  const torch::Tensor count = pool(m);
+  coarse.valid = count > 0;
+  coarse.depth = torch::where(coarse.valid, count / pool(w * m).clamp_min(1e-20), torch::zeros_like(count));
+  return coarse;
+}
+
+// A coarse inverse-depth map (0: none) at full resolution [B,1,h,w]:
+// bilinear between the coarse pixels that have one (weights renormalised
+// over them), 0 where none is near or beyond the last whole block.
+torch::Tensor UpsampledInverseDepth(const torch::Tensor& coarse_w, int64_t scale, int64_t h, int64_t w) {
+  const auto up = [&](const torch::Tensor& t) {
+    const torch::Tensor u = F::interpolate(t, F::InterpolateFuncOptions()
+                                                  .scale_factor(std::vector<double>{static_cast<double>(scale),
+                                                                                    static_cast<double>(scale)})
+                                                  .mode(torch::kBilinear)
+                                                  .align_corners(false)
+                                                  .recompute_scale_factor(false));
+    return F::pad(u, F::PadFuncOptions({0, w - u.size(3), 0, h - u.size(2)}));
+  };
+  const torch::Tensor m = (coarse_w > 0).to(coarse_w.scalar_type());
+  const torch::Tensor weight = up(m);
+  // Half the bilinear weight at least from coarse pixels with depth: no
+  // extrapolation far over a hole's border.
+  return torch::where(weight >= 0.5, up(coarse_w * m) / weight.clamp_min(1e-6), torch::zeros_like(weight));
+}
+
 void CheckShapes(const torch::Tensor& images, const torch::Tensor& intrinsics,
                  const torch::Tensor& extrinsics, const torch::Tensor& depth,
                  const torch::Tensor& valid) {
@@ -162,6 +215,9 @@ void PhotometricRefinementOptions::Check() const {
   if (propagation_levels < 1 || propagation_levels > 16) fail("propagation_levels must be in [1, 16]");
   if (propagation_slope_radius < 1 || propagation_slope_radius > 64) {
     fail("propagation_slope_radius must be in [1, 64]");
+  }
+  if (propagation_scale != 1 && propagation_scale != 2 && propagation_scale != 4) {
+    fail("propagation_scale must be 1, 2 or 4");
   }
 }
 
@@ -206,7 +262,57 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
 
   const torch::Tensor depth_in = depth.to(opts);
   const torch::Tensor usable = valid.to(torch::kBool) & (depth_in > 0) & torch::isfinite(depth_in);
-  const torch::Tensor w0 = torch::where(usable, 1.0 / depth_in, torch::zeros_like(depth_in));
+  const torch::Tensor w_network = torch::where(usable, 1.0 / depth_in, torch::zeros_like(depth_in));
+  const bool coarse_propagation = options.propagation_rounds > 0 && options.propagation_scale > 1 &&
+                                  h / options.propagation_scale >= 2 * r + 2 &&
+                                  w / options.propagation_scale >= 2 * r + 2;
+
+  // A source counts where the window around the match lies inside its
+  // image: the match at least r pixels from the border (the window's other
+  // pixels are sampled at their own matches, which lie about as far from it
+  // as they lie from the reference pixel).
+  const double margin = static_cast<double>(r);
+  // Every source's NCC at the network's depth, and whether it counts.
+  const SurfaceCorrelation at_network =
+      CorrelateAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, w_network, r, margin);
+  const torch::Tensor weights =
+      BetterHalfOfSources(at_network.ncc.view({b, n, h, w}), at_network.ok.view({b, n, h, w}));
+  // A chosen source whose window leaves its image at some hypothesis scores
+  // -1 there (the worst correlation): the search does not wander off the
+  // sources it was judged on (CombineSources, ScoreAlongSurface).
+  const auto surface_score = [&](const torch::Tensor& surface) {
+    return ScoreAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, surface, weights, r, margin);
+  };
+  const torch::Tensor textured = torch::sqrt(reference_var) >= options.min_texture;
+
+  // Where the search starts: the network's depth, or, with propagation at a
+  // coarser scale, that propagation's surface wherever it correlates better
+  // at full resolution (on the same sources) than the network's.
+  torch::Tensor w0 = w_network;
+  torch::Tensor start_score = CombineSources(at_network, weights);
+  torch::Tensor from_coarse = torch::zeros_like(usable);
+  if (coarse_propagation) {
+    const int64_t scale = options.propagation_scale;
+    const CoarseInput coarse = Downsampled(images.to(opts), K, w_network, usable, scale);
+    PhotometricRefinementOptions coarse_options = options;
+    coarse_options.propagation_scale = 1;
+    // One coarse pixel per step (scale full-resolution pixels): the coarse
+    // search is for reach, the full-resolution one for precision.
+    coarse_options.step_pixels = 1.0;
+    coarse_options.propagation_distance = std::max<int64_t>(1, options.propagation_distance / scale);
+    coarse_options.propagation_slope_radius = std::max<int64_t>(1, options.propagation_slope_radius / scale);
+    const PhotometricRefinement coarse_result = RefineDepthPhotometrically(
+        coarse.images, coarse.intrinsics, extrinsics, coarse.depth, coarse.valid, coarse_options);
+    const torch::Tensor coarse_w = torch::where(
+        coarse_result.refined, 1.0 / torch::where(coarse_result.refined, coarse_result.depth, torch::ones_like(coarse_result.depth)),
+        torch::zeros_like(coarse_result.depth));
+    const torch::Tensor candidate =
+        torch::where(usable, UpsampledInverseDepth(coarse_w, scale, h, w), torch::zeros_like(w_network));
+    const torch::Tensor candidate_score = surface_score(candidate);
+    from_coarse = (candidate > 0) & (candidate_score > start_score);
+    w0 = torch::where(from_coarse, candidate, w_network);
+    start_score = torch::where(from_coarse, candidate_score, start_score);
+  }
 
   // |dp_s/dw| = |b_xy a_z - a_xy b_z| / (a_z + w b_z)^2 (geometry.h): how far
   // the match moves per unit of inverse depth, in every source.
@@ -222,28 +328,10 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   const torch::Tensor dw = torch::where(searchable, options.step_pixels / max_rate,
                                         torch::zeros_like(max_rate));
 
-  // A source counts where the window around the match lies inside its
-  // image: the match at least r pixels from the border (the window's other
-  // pixels are sampled at their own matches, which lie about as far from it
-  // as they lie from the reference pixel).
-  const double margin = static_cast<double>(r);
-  // Every source's NCC at the network's depth, and whether it counts.
-  const SurfaceCorrelation at_start =
-      CorrelateAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, w0, r, margin);
-  const torch::Tensor weights =
-      BetterHalfOfSources(at_start.ncc.view({b, n, h, w}), at_start.ok.view({b, n, h, w}));
-  // A chosen source whose window leaves its image at some hypothesis scores
-  // -1 there (the worst correlation): the search does not wander off the
-  // sources it was judged on (CombineSources, ScoreAlongSurface).
-  const auto surface_score = [&](const torch::Tensor& surface) {
-    return ScoreAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, surface, weights, r, margin);
-  };
-  const torch::Tensor textured = torch::sqrt(reference_var) >= options.min_texture;
-
   std::vector<torch::Tensor> scores;
   for (int64_t k = -options.steps; k <= options.steps; ++k) {
     if (k == 0) {
-      scores.push_back(CombineSources(at_start, weights));
+      scores.push_back(start_score);
     } else {
       scores.push_back(surface_score(torch::add(w0, dw, static_cast<double>(k))));
     }
@@ -264,10 +352,10 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                                 (best >= options.min_ncc) & (before > -1) & (after > -1) & (w_new > 0);
 
   torch::Tensor w_out = torch::where(refined, w_new, w0);
-  torch::Tensor changed = refined.clone();  // updated in place by propagation
+  torch::Tensor changed = refined | from_coarse;  // updated in place by propagation
   torch::Tensor best_out = best;
-  torch::Tensor output_score = torch::where(refined, best, scores[static_cast<size_t>(options.steps)]);
-  if (options.propagation_rounds > 0) {
+  torch::Tensor output_score = torch::where(refined, best, start_score);
+  if (options.propagation_rounds > 0 && !coarse_propagation) {
     // Propagation: every pixel tries the planes of pixels far away in four
     // directions, on the sources chosen above, and keeps the best-scoring
     // one; the jumps halve from propagation_distance over

@@ -33,8 +33,8 @@
 // outside), and the reference window has texture (standard deviation of
 // grey values at least `min_texture`). Elsewhere the network's depth stays.
 //
-// Propagation (options.propagation_rounds > 0, off by default): after the
-// search, every pixel tries the planes of the pixels propagation_distance,
+// Propagation (options.propagation_rounds > 0; one round by default): every
+// pixel tries the planes of the pixels propagation_distance,
 // half that, ... (propagation_levels jumps) away in four directions: the
 // neighbour's inverse depth extended by the slopes of the least-squares
 // plane through the current map around it (inverse depth is affine in the
@@ -45,6 +45,19 @@
 // network's match was beyond the search's reach, as in PatchMatch; each
 // candidate is a whole shifted map, one warp and window pass like one
 // hypothesis of the search.
+//
+// Where propagation runs (options.propagation_scale): at 1, at full
+// resolution after the search, as above. At 2 (the default) or 4, first, on
+// the images averaged over 2x2 or 4x4 blocks with the network's inverse
+// depth averaged the same way: a search and propagation at that resolution
+// (steps of one coarse pixel, distances and slope radius divided by the
+// scale), whose surface, upsampled bilinearly, replaces the network's as the
+// start of the full-resolution search wherever it correlates better at full
+// resolution on the same sources. The coarse passes reach further (a coarse
+// pixel is 2 or 4 pixels) at a quarter or a sixteenth of the cost, and the
+// full-resolution search needs fewer steps (3 by default) after them. Too
+// small an image for the coarse window (fewer than 2r + 2 coarse pixels a
+// side) propagates at full resolution instead.
 //
 // Runs without autograd on any device; images [B,V,3,H,W] as in
 // DispMvsInput (view 0 the reference), intrinsics in the pixel-index

@@ -306,7 +306,9 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "--refinement ncc: the correlation window is (2r+1) x (2r+1) pixels.")
       ("refine_steps", po::value<int64_t>(&o.photometric.estimator.refinement_options.steps)
            ->default_value(o.photometric.estimator.refinement_options.steps),
-       "--refinement ncc: hypotheses on each side of the network's depth.")
+       "--refinement ncc: the full-resolution search's hypotheses on each side of its start "
+       "(the network's depth, or the coarse propagation's where that correlates better); "
+       "6 gives the old search alone with --refine_propagation_rounds 0.")
       ("refine_step_pixels",
        po::value<double>(&o.photometric.estimator.refinement_options.step_pixels)
            ->default_value(o.photometric.estimator.refinement_options.step_pixels,
@@ -326,7 +328,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("refine_propagation_rounds",
        po::value<int64_t>(&o.photometric.estimator.refinement_options.propagation_rounds)
            ->default_value(o.photometric.estimator.refinement_options.propagation_rounds),
-       "--refinement ncc: rounds of propagation after the search, 0 = none: every pixel "
+       "--refinement ncc: rounds of propagation (at --refine_propagation_scale), 0 = none: every pixel "
        "tries the planes of the pixels refine_propagation_distance, half that, ... "
        "(refine_propagation_levels jumps) away in four directions and keeps the one that "
        "correlates best, so that right depth spreads over the network's wrong blocks.")
@@ -343,6 +345,13 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
            ->default_value(o.photometric.estimator.refinement_options.propagation_slope_radius),
        "--refinement ncc: a propagated plane's slope is fitted to the depth over "
        "(2r+1) x (2r+1) pixels.")
+      ("refine_propagation_scale",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.propagation_scale)
+           ->default_value(o.photometric.estimator.refinement_options.propagation_scale),
+       "--refinement ncc: 1 = propagation at full resolution after the search; 2 or 4 = "
+       "search and propagation first on images averaged over 2x2 or 4x4 blocks (distances "
+       "scaled), then the full-resolution search from that surface wherever it correlates "
+       "better there than the network's: most of propagation's gain at a fraction of its time.")
       ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
            ->default_value(o.photometric.estimator.confidence),
        "The confidence maps: model (the probability that a pixel's depth is within 2 %, "

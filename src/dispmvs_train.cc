@@ -69,8 +69,11 @@ options (default):
                               --refine_steps)
   --eval_refine_min_ncc C     evaluation only, with ncc: correlation needed (--refine_min_ncc)
   --eval_refine_propagation_rounds K
-                              evaluation only, with ncc: rounds of propagation after the search
+                              evaluation only, with ncc: rounds of propagation
                               (--refine_propagation_rounds)
+  --eval_refine_propagation_scale S
+                              evaluation only, with ncc: 1, 2 or 4, the resolution propagation runs
+                              at (--refine_propagation_scale)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -283,6 +286,9 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--eval_refine_min_ncc") o.eval_refinement_options.min_ncc = ParseDouble(flag, value);
     else if (flag == "--eval_refine_propagation_rounds") {
       o.eval_refinement_options.propagation_rounds = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_refine_propagation_scale") {
+      o.eval_refinement_options.propagation_scale = ParseInt(flag, value);
     }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
