@@ -244,7 +244,8 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
 
   // Grey values; the reference's window statistics once, then a copy per
   // source for the per-hypothesis arithmetic ([B*N,1,H,W]).
-  const torch::Tensor grey = images.to(opts).mean(2);  // [B,V,H,W]
+  const torch::Tensor images_float = images.to(opts);
+  const torch::Tensor grey = images_float.mean(2);  // [B,V,H,W]
   const torch::Tensor reference = grey.narrow(1, 0, 1);  // [B,1,H,W]
   const torch::Tensor reference_mean = WindowMean(reference, r);
   const torch::Tensor reference_var =
@@ -293,7 +294,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   torch::Tensor from_coarse = torch::zeros_like(usable);
   if (coarse_propagation) {
     const int64_t scale = options.propagation_scale;
-    const CoarseInput coarse = Downsampled(images.to(opts), K, w_network, usable, scale);
+    const CoarseInput coarse = Downsampled(images_float, K, w_network, usable, scale);
     PhotometricRefinementOptions coarse_options = options;
     coarse_options.propagation_scale = 1;
     // One coarse pixel per step (scale full-resolution pixels): the coarse
@@ -303,9 +304,10 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     coarse_options.propagation_slope_radius = std::max<int64_t>(1, options.propagation_slope_radius / scale);
     const PhotometricRefinement coarse_result = RefineDepthPhotometrically(
         coarse.images, coarse.intrinsics, extrinsics, coarse.depth, coarse.valid, coarse_options);
-    const torch::Tensor coarse_w = torch::where(
-        coarse_result.refined, 1.0 / torch::where(coarse_result.refined, coarse_result.depth, torch::ones_like(coarse_result.depth)),
-        torch::zeros_like(coarse_result.depth));
+    // Inverse depth where the coarse pass changed it, 0 elsewhere (the
+    // reciprocal's infinities at depth 0 are never selected).
+    const torch::Tensor coarse_w = torch::where(coarse_result.refined, coarse_result.depth.reciprocal(),
+                                                torch::zeros_like(coarse_result.depth));
     const torch::Tensor candidate =
         torch::where(usable, UpsampledInverseDepth(coarse_w, scale, h, w), torch::zeros_like(w_network));
     const torch::Tensor candidate_score = surface_score(candidate);
