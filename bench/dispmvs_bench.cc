@@ -114,13 +114,27 @@ constexpr const char* kUsage =
     "  --refinement none|ncc    ncc: each pass also runs the photometric refinement of\n"
     "                           dispmvs_colmap's default, timed as the 'refine' column (none)\n"
     "  --refine_steps K         with ncc: the search's hypotheses on each side\n"
-    "                           (dispmvs_colmap --refine_steps) (6)\n"
+    "                           (dispmvs_colmap --refine_steps) (STEPS)\n"
     "  --refine_propagation_rounds K  with ncc: the refinement's propagation rounds\n"
-    "                           (dispmvs_colmap --refine_propagation_rounds) (0)\n"
+    "                           (dispmvs_colmap --refine_propagation_rounds) (ROUNDS)\n"
     "  --refine_propagation_levels K  with ncc: jumps per round (dispmvs_colmap\n"
-    "                           --refine_propagation_levels) (4)\n"
+    "                           --refine_propagation_levels) (LEVELS)\n"
     "  --refine_propagation_scale S  with ncc: 1, 2 or 4, the resolution propagation runs\n"
-    "                           at (dispmvs_colmap --refine_propagation_scale) (1)\n";
+    "                           at (dispmvs_colmap --refine_propagation_scale) (SCALE)\n";
+
+// kUsage with the refinement's defaults (dispmvs_colmap's) filled in.
+std::string Usage() {
+  const dispmvs::model::PhotometricRefinementOptions defaults;
+  std::string usage = kUsage;
+  const auto fill = [&](const std::string& name, int64_t value) {
+    usage.replace(usage.find(name), name.size(), "(" + std::to_string(value) + ")");
+  };
+  fill("(STEPS)", defaults.steps);
+  fill("(ROUNDS)", defaults.propagation_rounds);
+  fill("(LEVELS)", defaults.propagation_levels);
+  fill("(SCALE)", defaults.propagation_scale);
+  return usage;
+}
 
 std::vector<std::string> SplitComma(const std::string& s) {
   std::vector<std::string> out;
@@ -163,7 +177,7 @@ Options ParseArgs(int argc, char** argv) {
   for (int i = 1; i < argc; ++i) {
     const std::string flag = argv[i];
     if (flag == "--help" || flag == "-h") {
-      std::cout << kUsage;
+      std::cout << Usage();
       std::exit(0);
     }
     if (i + 1 >= argc) throw std::invalid_argument("missing value after " + flag);

@@ -2,11 +2,16 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
+#include <memory>
 #include <stdexcept>
+#include <vector>
 
 #include <torch/torch.h>
 
 #include "model/geometry.h"
+#include "model/surface_ncc_rows.h"
 
 namespace dispmvs::model {
 namespace {
@@ -112,6 +117,100 @@ TEST(SurfaceNccTest, BandsEqualTheOperationsAndDoNotDependOnThreads) {
   const torch::Tensor both = one.ok & ops.ok;
   EXPECT_GT(both.narrow(2, 60, 10).sum().item<int64_t>(), 0);  // rows about the first band border count
   EXPECT_LT((one.ncc - ops.ncc).abs().masked_select(both).max().item<float>(), 2e-4);
+}
+
+// The two builds of the row pass (surface_ncc_rows.h) on the same planes:
+// every source of MakeInputs (behind the camera, off to the side, invalid
+// and far surface values), a constant and a per-pixel b, a width that is
+// not a multiple of the AVX2 build's eight lanes, with and without a
+// `needed` mask. The same flags but for matches exactly on the border, the
+// same NCC to float rounding, and 0 / false where not needed.
+TEST(SurfaceNccTest, PortableAndAvx2RowPassesAgree) {
+  if (!CpuHasAvx2Fma()) GTEST_SKIP() << "this processor has no AVX2 and FMA";
+  const int64_t radius = 3, h = 150, w = 53;
+  for (const bool per_pixel_b : {false, true}) {
+    Inputs in = MakeInputs(radius, h, w);
+    if (per_pixel_b) in.b = in.b.expand_as(in.a).contiguous() * 1.01;
+    const int64_t planes = in.source.size(0), n = planes / in.surface.size(0), hw = h * w;
+    torch::manual_seed(7);
+    const torch::Tensor needed = (torch::rand({h, w}) > 0.3).to(torch::kFloat32);
+    int64_t counted = 0;
+    for (int64_t i = 0; i < planes; ++i) {
+      const float half_w = 0.5f * static_cast<float>(w - 1), half_h = 0.5f * static_cast<float>(h - 1);
+      const PlaneSampler sampler{in.source.data_ptr<float>() + i * hw,
+                                 in.a.data_ptr<float>() + i * 3 * hw,
+                                 in.b.data_ptr<float>() + i * (per_pixel_b ? 3 * hw : 3),
+                                 in.surface.data_ptr<float>() + (i / n) * hw,
+                                 h,
+                                 w,
+                                 per_pixel_b,
+                                 half_w,
+                                 half_h,
+                                 half_w - static_cast<float>(radius),
+                                 half_h - static_cast<float>(radius)};
+      for (const bool masked : {false, true}) {
+        const float* mask = masked ? needed.data_ptr<float>() : nullptr;
+        std::vector<float> ncc_portable(static_cast<size_t>(hw)), ncc_avx2(static_cast<size_t>(hw));
+        std::unique_ptr<bool[]> ok_portable(new bool[hw]), ok_avx2(new bool[hw]);
+        const float* ref = in.reference.data_ptr<float>() + i * hw;
+        const float* mean = in.reference_mean.data_ptr<float>() + i * hw;
+        const float* var = in.reference_var.data_ptr<float>() + i * hw;
+        CorrelateRowsPortable(sampler, ref, mean, var, radius, 0, h, ncc_portable.data(), ok_portable.get(), mask);
+        CorrelateRowsAvx2(sampler, ref, mean, var, radius, 0, h, ncc_avx2.data(), ok_avx2.get(), mask);
+        int64_t flipped = 0;
+        float largest = 0;
+        for (int64_t p = 0; p < hw; ++p) {
+          flipped += ok_portable[p] != ok_avx2[p];
+          if (ok_portable[p] && ok_avx2[p]) {
+            largest = std::max(largest, std::abs(ncc_portable[p] - ncc_avx2[p]));
+            ++counted;
+          }
+          if (masked && needed.data_ptr<float>()[p] == 0) {
+            EXPECT_FALSE(ok_avx2[p]);
+            EXPECT_EQ(ncc_avx2[p], 0.0f);
+          }
+        }
+        EXPECT_LE(flipped, 3) << "plane " << i << " per-pixel b " << per_pixel_b << " masked " << masked;
+        EXPECT_LT(largest, 2e-5) << "plane " << i << " per-pixel b " << per_pixel_b << " masked " << masked;
+      }
+    }
+    EXPECT_GT(counted, planes * hw / 4);  // the comparison sees real matches
+  }
+}
+
+// A plane of one row: the AVX2 build would read a second row for pixels
+// without a 2x2 block, so CorrelateRows gives such planes to the portable
+// build (the same bits).
+TEST(SurfaceNccTest, OneRowPlanesTakeThePortablePass) {
+  EXPECT_FALSE(Avx2RowsFit(1, 40));
+  EXPECT_TRUE(Avx2RowsFit(2, 40));
+  const int64_t radius = 1, h = 1, w = 40;
+  Inputs in = MakeInputs(radius, /*h=*/2, w);  // two rows, of which the first is the plane
+  const torch::Tensor source = in.source.select(0, 0).select(0, 0).narrow(0, 0, 1).contiguous();
+  const torch::Tensor reference = in.reference.select(0, 0).select(0, 0).narrow(0, 0, 1).contiguous();
+  const torch::Tensor a = in.a.select(0, 0).narrow(1, 0, 1).contiguous();  // [3,1,W]
+  const torch::Tensor b = in.b.select(0, 0).reshape({3}).contiguous();
+  const torch::Tensor surface = in.surface.select(0, 0).select(0, 0).narrow(0, 0, 1).clamp_min(0.2).contiguous();
+  const torch::Tensor mean = torch::full({h, w}, 0.5f), var = torch::full({h, w}, 0.08f);
+  // The match counts anywhere in the source's row span (limit_y generous:
+  // the one-row source is only there to be read).
+  const PlaneSampler sampler{source.data_ptr<float>(), a.data_ptr<float>(), b.data_ptr<float>(),
+                             surface.data_ptr<float>(), h, w, false, 0.5f * (w - 1), 0.0f, 0.5f * (w - 1), 100.0f};
+  std::vector<float> ncc_dispatched(w), ncc_portable(w);
+  std::unique_ptr<bool[]> ok_dispatched(new bool[w]), ok_portable(new bool[w]);
+  CorrelateRows(sampler, reference.data_ptr<float>(), mean.data_ptr<float>(), var.data_ptr<float>(), radius, 0, h,
+                ncc_dispatched.data(), ok_dispatched.get(), nullptr);
+  CorrelateRowsPortable(sampler, reference.data_ptr<float>(), mean.data_ptr<float>(), var.data_ptr<float>(), radius,
+                        0, h, ncc_portable.data(), ok_portable.get(), nullptr);
+  int64_t counted = 0;
+  for (int64_t j = 0; j < w; ++j) {
+    EXPECT_EQ(ok_dispatched[j], ok_portable[j]) << j;
+    if (ok_portable[j]) {
+      EXPECT_EQ(ncc_dispatched[j], ncc_portable[j]) << j;
+      ++counted;
+    }
+  }
+  EXPECT_GT(counted, 0);
 }
 
 // The score of a surface without per-source maps: the weighted mean of the
