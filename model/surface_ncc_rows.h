@@ -8,7 +8,8 @@
 //  * CorrelateRowsAvx2: the projection and bilinear weights of eight pixels
 //    at a time (sampling was about half of the scalar pass's time), and the
 //    window sums and NCC of eight pixels at a time, on processors with AVX2
-//    and FMA: about 2.5x faster on a 640x480 plane (bench below).
+//    and FMA: 2.35x faster on a 640x480 plane
+//    (bench/surface_ncc_microbench.cc, docs/benchmarks.md).
 // CorrelateRows picks the AVX2 build where the processor has it. The two
 // agree to float rounding (FMA contracts some products); surface_ncc_test.cc
 // checks them against each other and against LibTorch's operations.
