@@ -23,8 +23,8 @@ struct PhotometricRefinementOptions {
   // slopes fitted to the current map over (2 radius + 1)^2 windows.
   // 2 since the NCC pass's AVX2 build (surface_ncc_rows.h) made two rounds at
   // scale 2 cheaper than one was: realval's MVS pairs within 2 % 0.537
-  // against 0.526 for one round (stage 28), 1.32-1.34x the network's time in
-  // fp32 and 1.40x in bf16 (docs/dense.md, "Propagation").
+  // against 0.526 for one round (stage 28), 1.29-1.34x the network's time in
+  // fp32 and 1.38-1.43x in bf16 (docs/dense.md, "Propagation").
   int64_t propagation_rounds = 2;
   int64_t propagation_distance = 32;
   int64_t propagation_levels = 4;
