@@ -48,6 +48,27 @@ float PlaneSampler::Sample(int64_t p, bool* inside) const {
          fy * ((1 - fx) * at(y0 + 1, x0) + fx * at(y0 + 1, x0 + 1));
 }
 
+namespace {
+
+// One pixel's NCC and flag from its window's sums of v, v^2 and
+// reference * v (both builds' arithmetic, the AVX2 one for the row's last
+// w % 8): 0 and false where not wanted.
+inline void PixelNcc(double sum_v, double sum_vv, double sum_rv, double inverse_count, float mean, float var,
+                     bool inside, bool wanted, float* ncc, bool* ok) {
+  if (!wanted) {
+    *ncc = 0.0f;
+    *ok = false;
+    return;
+  }
+  const float s_mean = static_cast<float>(sum_v * inverse_count);
+  const float s_var = std::max(static_cast<float>(sum_vv * inverse_count) - s_mean * s_mean, 0.0f);
+  const float covariance = static_cast<float>(sum_rv * inverse_count) - mean * s_mean;
+  *ncc = covariance / std::sqrt(std::max(var * s_var, 1e-12f));
+  *ok = inside && s_var > 1e-10f;
+}
+
+}  // namespace
+
 // Rows [row_begin, row_end) of one source plane in one streaming pass: rows
 // are sampled as the window reaches them (from row_begin - r) into a ring of
 // 2r + 2 rows, column sums of v, v^2 and reference * v move down with the
@@ -110,18 +131,9 @@ void CorrelateRowsPortable(const PlaneSampler& sampler, const float* reference, 
       s_rv += col_rv[j];
     }
     for (int64_t j = 0; j < w; ++j) {
-      if (needed_row == nullptr || needed_row[j] != 0) {
-        const double inverse_count = inverse_rows * inverse_cols[static_cast<size_t>(j)];
-        const int64_t p = i * w + j;
-        const float s_mean = static_cast<float>(s_v * inverse_count);
-        const float s_var = std::max(static_cast<float>(s_vv * inverse_count) - s_mean * s_mean, 0.0f);
-        const float covariance = static_cast<float>(s_rv * inverse_count) - reference_mean[p] * s_mean;
-        ncc_row[j] = covariance / std::sqrt(std::max(reference_var[p] * s_var, 1e-12f));
-        ok_row[j] = in[j] && s_var > 1e-10f;
-      } else {
-        ncc_row[j] = 0.0f;
-        ok_row[j] = false;
-      }
+      PixelNcc(s_v, s_vv, s_rv, inverse_rows * inverse_cols[static_cast<size_t>(j)], reference_mean[i * w + j],
+               reference_var[i * w + j], in[j] != 0, needed_row == nullptr || needed_row[j] != 0, ncc_row + j,
+               ok_row + j);
       if (j + r + 1 < w) {
         s_v += col_v[j + r + 1];
         s_vv += col_vv[j + r + 1];
@@ -298,13 +310,8 @@ __attribute__((target("avx2,fma"))) void WindowNccRowAvx2(const double* first_v,
       sum_vv += first_vv[j + t];
       sum_rv += first_rv[j + t];
     }
-    const float inverse_count = inverse_rows * inverse_cols[j];
-    const float s_mean = static_cast<float>(sum_v) * inverse_count;
-    const float s_var = std::max(static_cast<float>(sum_vv) * inverse_count - s_mean * s_mean, 0.0f);
-    const float covariance = static_cast<float>(sum_rv) * inverse_count - mean[j] * s_mean;
-    const bool wanted = needed == nullptr || needed[j] != 0;
-    ncc[j] = wanted ? covariance / std::sqrt(std::max(var[j] * s_var, 1e-12f)) : 0.0f;
-    ok[j] = wanted && in[j] != 0 && s_var > 1e-10f;
+    PixelNcc(sum_v, sum_vv, sum_rv, static_cast<double>(inverse_rows * inverse_cols[j]), mean[j], var[j],
+             in[j] != 0, needed == nullptr || needed[j] != 0, ncc + j, ok + j);
   }
 }
 
