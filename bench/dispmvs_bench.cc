@@ -120,7 +120,12 @@ constexpr const char* kUsage =
     "  --refine_propagation_levels K  with ncc: jumps per round (dispmvs_colmap\n"
     "                           --refine_propagation_levels) (LEVELS)\n"
     "  --refine_propagation_scale S  with ncc: 1, 2 or 4, the resolution propagation runs\n"
-    "                           at (dispmvs_colmap --refine_propagation_scale) (SCALE)\n";
+    "                           at (dispmvs_colmap --refine_propagation_scale) (SCALE)\n"
+    "  --refine_full_resolution_rounds K  with ncc and scale 2 or 4: propagation rounds at\n"
+    "                           full resolution after the search (dispmvs_colmap\n"
+    "                           --refine_full_resolution_rounds) (FULLROUNDS)\n"
+    "  --refine_full_resolution_levels K  with ncc: jumps per full-resolution round\n"
+    "                           (dispmvs_colmap --refine_full_resolution_levels) (FULLLEVELS)\n";
 
 // kUsage with the refinement's defaults (dispmvs_colmap's) filled in.
 std::string Usage() {
@@ -133,6 +138,8 @@ std::string Usage() {
   fill("(ROUNDS)", defaults.propagation_rounds);
   fill("(LEVELS)", defaults.propagation_levels);
   fill("(SCALE)", defaults.propagation_scale);
+  fill("(FULLROUNDS)", defaults.full_resolution_rounds);
+  fill("(FULLLEVELS)", defaults.full_resolution_levels);
   return usage;
 }
 
@@ -223,6 +230,10 @@ Options ParseArgs(int argc, char** argv) {
     } else if (flag == "--refine_propagation_scale") {
       o.refinement.propagation_scale = ParseInteger(flag, value, 1, 4);
       o.refinement.Check();
+    } else if (flag == "--refine_full_resolution_rounds") {
+      o.refinement.full_resolution_rounds = ParseInteger(flag, value, 0, 16);
+    } else if (flag == "--refine_full_resolution_levels") {
+      o.refinement.full_resolution_levels = ParseInteger(flag, value, 1, 16);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

@@ -33,7 +33,7 @@
 // outside), and the reference window has texture (standard deviation of
 // grey values at least `min_texture`). Elsewhere the network's depth stays.
 //
-// Propagation (options.propagation_rounds > 0; one round by default): every
+// Propagation (options.propagation_rounds > 0; two rounds by default): every
 // pixel tries the planes of the pixels propagation_distance,
 // half that, ... (propagation_levels jumps) away in four directions: the
 // neighbour's inverse depth extended by the slopes of the least-squares
@@ -55,9 +55,14 @@
 // start of the full-resolution search wherever it correlates better at full
 // resolution on the same sources. The coarse passes reach further (a coarse
 // pixel is 2 or 4 pixels) at a quarter or a sixteenth of the cost, and the
-// full-resolution search needs fewer steps (3 by default) after them. Too
-// small an image for the coarse window (fewer than 2r + 2 coarse pixels a
-// side) propagates at full resolution instead.
+// full-resolution search needs fewer steps (3 by default) after them. Then
+// options.full_resolution_rounds rounds (1 by default) propagate at full
+// resolution, with jumps of propagation_distance / scale pixels and
+// full_resolution_levels levels (16, 8): the coarse rounds find the
+// surface, this round gives it planes fitted at full resolution, which the
+// search's parabola between whole steps does not reach. Too small an image
+// for the coarse window (fewer than 2r + 2 coarse pixels a side)
+// propagates at full resolution instead (propagation_rounds rounds).
 //
 // Runs without autograd on any device; images [B,V,3,H,W] as in
 // DispMvsInput (view 0 the reference), intrinsics in the pixel-index

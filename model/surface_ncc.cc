@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <initializer_list>
 #include <memory>
 #include <stdexcept>
@@ -140,6 +141,32 @@ SurfaceCorrelation CorrelateAlongSurfaceCpu(const torch::Tensor& source, const t
   return result;
 }
 
+// One source's share of the band's score: sum += weight * (ncc where ok,
+// else -1), weight_sum += weight. Branch-free over unaliased pointers, and
+// ok read as bytes (GCC has no vector type for bool), so that the compiler
+// vectorises it: the conditional form on bool stayed scalar and took a
+// tenth of the refinement's time at full resolution.
+void AccumulateSource(const float* __restrict weight, const float* __restrict ncc, const uint8_t* __restrict ok,
+                      int64_t count, float* __restrict sum, float* __restrict weight_sum) {
+  for (int64_t p = 0; p < count; ++p) {
+    // ok ? ncc : -1 as arithmetic on ok's 0 or 1.
+    const float counts = static_cast<float>(static_cast<int32_t>(ok[p]));
+    sum[p] += weight[p] * (counts * ncc[p] + (counts - 1.0f));
+    weight_sum[p] += weight[p];
+  }
+}
+
+// The band's score: the mean over the selected sources, -1 where none is.
+// (Vectorised where the file is built with -fno-trapping-math, as
+// model/CMakeLists.txt builds it.)
+void MeanOverSources(const float* __restrict sum, const float* __restrict weight_sum, int64_t count,
+                     float* __restrict out) {
+  for (int64_t p = 0; p < count; ++p) {
+    const float mean = sum[p] / std::max(weight_sum[p], 1.0f);
+    out[p] = weight_sum[p] > 0 ? mean : -1.0f;
+  }
+}
+
 // The score of SurfaceScoreByOps, one band of one batch item per task: each
 // selected source's NCC rows go to a band-sized buffer and are summed at
 // once, so no per-source map is written.
@@ -167,15 +194,9 @@ torch::Tensor ScoreAlongSurfaceCpu(const torch::Tensor& source, const torch::Ten
         for (int64_t p = 0; p < count && !any; ++p) any = wgt[p] != 0;
         if (!any) continue;  // no pixel of the band counts this source
         in.Correlate(item * in.n + s, radius, row_begin, row_end, ncc.data(), ok.get(), wgt);
-        for (int64_t p = 0; p < count; ++p) {
-          sum[p] += wgt[p] * (ok[p] ? ncc[p] : -1.0f);
-          weight_sum[p] += wgt[p];
-        }
+        AccumulateSource(wgt, ncc.data(), reinterpret_cast<const uint8_t*>(ok.get()), count, sum.data(), weight_sum.data());
       }
-      float* out_band = out + item * hw + row_begin * in.w;
-      for (int64_t p = 0; p < count; ++p) {
-        out_band[p] = weight_sum[p] > 0 ? sum[p] / std::max(weight_sum[p], 1.0f) : -1.0f;
-      }
+      MeanOverSources(sum.data(), weight_sum.data(), count, out + item * hw + row_begin * in.w);
     }
   });
   return score;

@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -341,7 +342,7 @@ std::vector<BadInputCase> Cases() {
        "error: cannot use the weights {DIR}/none.safetensors: safetensors {DIR}/none.safetensors: cannot open for reading (no such file)",
        Program::kColmap, Nothing(), fast + " --model_path {DIR}/none.safetensors"},
       {"model_truncated", 1,
-       "error: cannot use the weights {DIR}/cut.safetensors: safetensors {DIR}/cut.safetensors: tensor 'context_encoder.net.down16.first.conv.weight': data_offsets [3318596, 3429188] outside the data section of 3343220 bytes",
+       "error: cannot use the weights {DIR}/cut.safetensors: safetensors {DIR}/cut.safetensors: tensor 'context_encoder.net.down16.first.conv.weight': data_offsets [3318596, 3429188] outside the data section of {HALF_MODEL_DATA_BYTES} bytes",
        Program::kColmap,
        [](const fs::path& ws) {
          fs::copy_file(DISPMVS_MODEL_PATH, ws.parent_path() / "cut.safetensors");
@@ -374,6 +375,9 @@ std::vector<BadInputCase> Cases() {
       {"refine_propagation_rounds_negative", 1,
        "error: --refine_* options: photometric refinement: propagation_rounds must be in [0, 16]",
        Program::kColmap, Nothing(), fast + " --refine_propagation_rounds -1"},
+      {"refine_full_resolution_rounds_too_many", 1,
+       "error: --refine_* options: photometric refinement: full_resolution_rounds must be in [0, 16]",
+       Program::kColmap, Nothing(), fast + " --refine_full_resolution_rounds 17"},
       {"confidence_unknown", 1,
        "error: --confidence must be model or network, got 'peak'",
        Program::kColmap, Nothing(), fast + " --confidence peak"},
@@ -510,11 +514,24 @@ std::vector<BadInputCase> Cases() {
 }
 
 
+// The data section that the shipped weights keep when cut to half their
+// size as Truncate cuts them (safetensors: an 8-byte little-endian header
+// length, the header, then the data), read from the file itself, so that
+// model_truncated's message follows a refitted file's header length.
+std::string HalfModelDataBytes() {
+  const std::string bytes = ReadFileBytes(DISPMVS_MODEL_PATH);
+  uint64_t header = 0;
+  for (int i = 7; i >= 0; --i) header = header << 8 | static_cast<unsigned char>(bytes.at(i));
+  return std::to_string(static_cast<uint64_t>(static_cast<std::size_t>(bytes.size() * 0.5)) - 8 - header);
+}
+
 std::string Substitute(std::string text, const fs::path& ws, const fs::path& dir) {
   for (const auto& [key, value] : {std::pair<std::string, std::string>{"{WS}", ws.string()},
                                    {"{DIR}", dir.string()}}) {
     for (std::size_t at; (at = text.find(key)) != std::string::npos;) text.replace(at, key.size(), value);
   }
+  const std::string half = "{HALF_MODEL_DATA_BYTES}";
+  if (const std::size_t at = text.find(half); at != std::string::npos) text.replace(at, half.size(), HalfModelDataBytes());
   return text;
 }
 

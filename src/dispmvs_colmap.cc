@@ -352,6 +352,17 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "search and propagation first on images averaged over 2x2 or 4x4 blocks (distances "
        "scaled), then the full-resolution search from that surface wherever it correlates "
        "better there than the network's: most of propagation's gain at a fraction of its time.")
+      ("refine_full_resolution_rounds",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.full_resolution_rounds)
+           ->default_value(o.photometric.estimator.refinement_options.full_resolution_rounds),
+       "--refinement ncc with --refine_propagation_scale 2 or 4: rounds of propagation at full "
+       "resolution after the full-resolution search, with jumps of refine_propagation_distance / "
+       "scale pixels and less: each surface found at the coarse scale gets its full-resolution "
+       "plane.")
+      ("refine_full_resolution_levels",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.full_resolution_levels)
+           ->default_value(o.photometric.estimator.refinement_options.full_resolution_levels),
+       "--refinement ncc: jumps per full-resolution round, each half the one before.")
       ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
            ->default_value(o.photometric.estimator.confidence),
        "The confidence maps: model (the probability that a pixel's depth is within 2 %, "

@@ -74,6 +74,9 @@ options (default):
   --eval_refine_propagation_scale S
                               evaluation only, with ncc: 1, 2 or 4, the resolution propagation runs
                               at (--refine_propagation_scale)
+  --eval_refine_full_resolution_rounds K
+                              evaluation only, with ncc and scale 2 or 4: propagation rounds at full
+                              resolution after the search (--refine_full_resolution_rounds)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -289,6 +292,9 @@ CommandLine Parse(int argc, char** argv) {
     }
     else if (flag == "--eval_refine_propagation_scale") {
       o.eval_refinement_options.propagation_scale = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_refine_full_resolution_rounds") {
+      o.eval_refinement_options.full_resolution_rounds = ParseInt(flag, value);
     }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
