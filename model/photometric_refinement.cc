@@ -83,17 +83,15 @@ void TakeBetterCandidates(const torch::Tensor& candidate, const torch::Tensor& c
   const int64_t batch = c.size(0), plane = c.numel() / batch;
   const float* c_p = c.data_ptr<float>();
   const float* s_p = s.data_ptr<float>();
-  const bool* a_p = a.data_ptr<bool>();
+  const uint8_t* a_b = reinterpret_cast<const uint8_t*>(a.data_ptr<bool>());
   float* w_p = w_out.data_ptr<float>();
   float* cur_p = current.data_ptr<float>();
-  bool* ch_p = changed.data_ptr<bool>();
+  uint8_t* ch_b = reinterpret_cast<uint8_t*>(changed.data_ptr<bool>());
   const float min_score = static_cast<float>(min_ncc);
   const float* low = lo.data_ptr<float>();
   const float* high = hi.data_ptr<float>();
   // Every pixel on its own: chunks in parallel (serial and branching, this
   // loop was a twentieth of the full-resolution refinement's time).
-  const uint8_t* a_b = reinterpret_cast<const uint8_t*>(a_p);
-  uint8_t* ch_b = reinterpret_cast<uint8_t*>(ch_p);
   at::parallel_for(0, batch * plane, 16384, [&](int64_t begin, int64_t end) {
     for (int64_t p = begin; p < end;) {
       const int64_t item = p / plane, stop = std::min(end, (item + 1) * plane);
@@ -350,8 +348,9 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   if (fine_rounds > 0) {
     // Propagation: every pixel tries the planes of pixels far away in four
     // directions, on the sources chosen above, and keeps the best-scoring
-    // one; the jumps halve from propagation_distance over
-    // propagation_levels levels, so a right surface crosses a wrong block of
+    // one; the jumps halve from fine_distance over fine_levels levels (the
+    // full-resolution round's after a coarse propagation), so a right
+    // surface crosses a wrong block of
     // the network's in a few steps (as PatchMatch's propagation does, but
     // on whole maps, so every candidate costs one warp and window pass).
     const torch::Tensor candidates_allowed = searchable & textured;

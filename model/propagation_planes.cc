@@ -20,6 +20,18 @@ void CheckMap(const torch::Tensor& t, const torch::Tensor& like, const char* fun
   }
 }
 
+void CheckSlopeInputs(const torch::Tensor& w, const torch::Tensor& usable, int64_t radius) {
+  CheckMap(w, torch::Tensor(), "LeastSquaresSlopes", "w");
+  CheckMap(usable, w, "LeastSquaresSlopes", "usable");
+  if (radius < 1) throw std::invalid_argument("LeastSquaresSlopes: radius must be >= 1");
+}
+
+void CheckPlaneInputs(const torch::Tensor& w, const torch::Tensor& gx, const torch::Tensor& gy) {
+  CheckMap(w, torch::Tensor(), "PlaneFromNeighbour", "w");
+  CheckMap(gx, w, "PlaneFromNeighbour", "gx");
+  CheckMap(gy, w, "PlaneFromNeighbour", "gy");
+}
+
 bool CpuFloat(const torch::Tensor& t) { return t.device().is_cpu() && t.scalar_type() == torch::kFloat32; }
 
 // Rows per task of the slope fit: each band sums its first window afresh
@@ -164,13 +176,9 @@ torch::Tensor PlaneFromNeighbourCpu(const torch::Tensor& w_in, const torch::Tens
   return out;
 }
 
-}  // namespace
-
-std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopesByOps(const torch::Tensor& w,
-                                                                const torch::Tensor& usable, int64_t radius) {
-  CheckMap(w, torch::Tensor(), "LeastSquaresSlopes", "w");
-  CheckMap(usable, w, "LeastSquaresSlopes", "usable");
-  if (radius < 1) throw std::invalid_argument("LeastSquaresSlopes: radius must be >= 1");
+// LeastSquaresSlopesByOps on checked inputs.
+std::pair<torch::Tensor, torch::Tensor> SlopesByOps(const torch::Tensor& w, const torch::Tensor& usable,
+                                                    int64_t radius) {
   const int64_t h = w.size(2), wd = w.size(3);
   const torch::Tensor m = usable.to(w.scalar_type());
   const torch::Tensor x =
@@ -192,35 +200,43 @@ std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopesByOps(const torch::Ten
           torch::where(ok, (cxx * cyw - cxy * cxw) / safe, torch::zeros_like(w))};
 }
 
-std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopes(const torch::Tensor& w, const torch::Tensor& usable,
-                                                           int64_t radius) {
-  CheckMap(w, torch::Tensor(), "LeastSquaresSlopes", "w");
-  CheckMap(usable, w, "LeastSquaresSlopes", "usable");
-  if (radius < 1) throw std::invalid_argument("LeastSquaresSlopes: radius must be >= 1");
-  if (CpuFloat(w) && usable.device().is_cpu() && usable.scalar_type() == torch::kBool) {
-    return LeastSquaresSlopesCpu(w, usable, radius);
-  }
-  return LeastSquaresSlopesByOps(w, usable, radius);
-}
-
-torch::Tensor PlaneFromNeighbourByOps(const torch::Tensor& w, const torch::Tensor& gx, const torch::Tensor& gy,
-                                      int64_t dx, int64_t dy) {
-  CheckMap(w, torch::Tensor(), "PlaneFromNeighbour", "w");
-  CheckMap(gx, w, "PlaneFromNeighbour", "gx");
-  CheckMap(gy, w, "PlaneFromNeighbour", "gy");
+// PlaneFromNeighbourByOps on checked inputs.
+torch::Tensor PlaneByOps(const torch::Tensor& w, const torch::Tensor& gx, const torch::Tensor& gy, int64_t dx,
+                         int64_t dy) {
   // Computed at the neighbour, then shifted once: a third of the passes of
   // shifting the depth and both slopes.
   const torch::Tensor plane = w - gx * static_cast<double>(dx) - gy * static_cast<double>(dy);
   return Shifted(torch::where((w > 0) & (plane > 0), plane, torch::zeros_like(plane)), dx, dy);
 }
 
+}  // namespace
+
+std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopesByOps(const torch::Tensor& w,
+                                                                const torch::Tensor& usable, int64_t radius) {
+  CheckSlopeInputs(w, usable, radius);
+  return SlopesByOps(w, usable, radius);
+}
+
+std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopes(const torch::Tensor& w, const torch::Tensor& usable,
+                                                           int64_t radius) {
+  CheckSlopeInputs(w, usable, radius);
+  if (CpuFloat(w) && usable.device().is_cpu() && usable.scalar_type() == torch::kBool) {
+    return LeastSquaresSlopesCpu(w, usable, radius);
+  }
+  return SlopesByOps(w, usable, radius);
+}
+
+torch::Tensor PlaneFromNeighbourByOps(const torch::Tensor& w, const torch::Tensor& gx, const torch::Tensor& gy,
+                                      int64_t dx, int64_t dy) {
+  CheckPlaneInputs(w, gx, gy);
+  return PlaneByOps(w, gx, gy, dx, dy);
+}
+
 torch::Tensor PlaneFromNeighbour(const torch::Tensor& w, const torch::Tensor& gx, const torch::Tensor& gy,
                                  int64_t dx, int64_t dy) {
-  CheckMap(w, torch::Tensor(), "PlaneFromNeighbour", "w");
-  CheckMap(gx, w, "PlaneFromNeighbour", "gx");
-  CheckMap(gy, w, "PlaneFromNeighbour", "gy");
+  CheckPlaneInputs(w, gx, gy);
   if (CpuFloat(w) && CpuFloat(gx) && CpuFloat(gy)) return PlaneFromNeighbourCpu(w, gx, gy, dx, dy);
-  return PlaneFromNeighbourByOps(w, gx, gy, dx, dy);
+  return PlaneByOps(w, gx, gy, dx, dy);
 }
 
 }  // namespace dispmvs::model
