@@ -125,7 +125,9 @@ constexpr const char* kUsage =
     "                           full resolution after the search (dispmvs_colmap\n"
     "                           --refine_full_resolution_rounds) (FULLROUNDS)\n"
     "  --refine_full_resolution_levels K  with ncc: jumps per full-resolution round\n"
-    "                           (dispmvs_colmap --refine_full_resolution_levels) (FULLLEVELS)\n";
+    "                           (dispmvs_colmap --refine_full_resolution_levels) (FULLLEVELS)\n"
+    "  --refine_sweep_hypotheses K  with ncc: the sweep's most depths, 0 = off\n"
+    "                           (dispmvs_colmap --refine_sweep_hypotheses) (SWEEP)\n";
 
 // kUsage with the refinement's defaults (dispmvs_colmap's) filled in.
 std::string Usage() {
@@ -140,6 +142,7 @@ std::string Usage() {
   fill("(SCALE)", defaults.propagation_scale);
   fill("(FULLROUNDS)", defaults.full_resolution_rounds);
   fill("(FULLLEVELS)", defaults.full_resolution_levels);
+  fill("(SWEEP)", defaults.sweep_hypotheses);
   return usage;
 }
 
@@ -234,6 +237,8 @@ Options ParseArgs(int argc, char** argv) {
       o.refinement.full_resolution_rounds = ParseInteger(flag, value, 0, 16);
     } else if (flag == "--refine_full_resolution_levels") {
       o.refinement.full_resolution_levels = ParseInteger(flag, value, 1, 16);
+    } else if (flag == "--refine_sweep_hypotheses") {
+      o.refinement.sweep_hypotheses = ParseInteger(flag, value, 0, 1024);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

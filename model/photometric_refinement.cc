@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "model/depth_sweep.h"
 #include "model/dispmvs_net.h"
 #include "model/geometry.h"
 #include "model/propagation_planes.h"
@@ -40,6 +41,12 @@ torch::Tensor BetterHalfOfSources(const torch::Tensor& ncc, const torch::Tensor&
     rank += ((o > ranked) | ((o == ranked) & (index > other))).to(torch::kLong);
   }
   return (valid & (rank < keep)).to(ncc.scalar_type());
+}
+
+// Per batch item, the source the better half chose at most pixels
+// (weights [B,N,H,W] 0/1): the sweep's one source. [B] long.
+torch::Tensor SourceChosenMost(const torch::Tensor& weights) {
+  return weights.sum({2, 3}).argmax(1);
 }
 
 // TakeBetterCandidates' update on one batch item's pixels [0, count). Loads
@@ -199,6 +206,8 @@ void PhotometricRefinementOptions::Check() const {
   }
   if (full_resolution_rounds < 0 || full_resolution_rounds > 16) fail("full_resolution_rounds must be in [0, 16]");
   if (full_resolution_levels < 1 || full_resolution_levels > 16) fail("full_resolution_levels must be in [1, 16]");
+  if (sweep_hypotheses < 0 || sweep_hypotheses > 1024) fail("sweep_hypotheses must be in [0, 1024]");
+  if (!(sweep_step_pixels > 0 && sweep_step_pixels <= 64)) fail("sweep_step_pixels must be in (0, 64]");
 }
 
 bool ParseRefinementMode(const std::string& value, const std::string& option) {
@@ -271,7 +280,25 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   // at full resolution (on the same sources) than the network's.
   torch::Tensor w0 = w_network;
   torch::Tensor start_score = CombineSources(at_network, weights);
-  torch::Tensor from_coarse = torch::zeros_like(usable);
+  // Where the start is no longer the network's depth (the sweep's or the
+  // coarse propagation's surface took it): counts as refined.
+  torch::Tensor start_replaced = torch::zeros_like(usable);
+  // The sweep (depth_sweep.h) runs where the search starts from the
+  // network's depth: in the coarse pass when there is one, else here.
+  if (options.sweep_hypotheses > 0 && !coarse_propagation) {
+    const torch::Tensor chosen = SourceChosenMost(weights);  // [B] per batch item
+    const torch::Tensor pick = torch::arange(b, chosen.options()) * n + chosen;
+    const torch::Tensor candidate =
+        SweepInverseDepth(src.index_select(0, pick), reference, reference_mean, reference_var,
+                          pair.a.index_select(0, pick), pair.b.index_select(0, pick), w_network, usable, r,
+                          options.sweep_hypotheses, options.sweep_step_pixels);
+    const torch::Tensor candidate_score = surface_score(candidate);
+    const torch::Tensor take = (candidate > 0) & textured & (candidate_score >= options.min_ncc) &
+                               (candidate_score > start_score);
+    w0 = torch::where(take, candidate, w0);
+    start_score = torch::where(take, candidate_score, start_score);
+    start_replaced = take;
+  }
   if (coarse_propagation) {
     const int64_t scale = options.propagation_scale;
     const CoarseInput coarse = Downsampled(images_float, K, w_network, usable, scale);
@@ -291,9 +318,9 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     const torch::Tensor candidate =
         torch::where(usable, UpsampledInverseDepth(coarse_w, scale, h, w), torch::zeros_like(w_network));
     const torch::Tensor candidate_score = surface_score(candidate);
-    from_coarse = (candidate > 0) & (candidate_score > start_score);
-    w0 = torch::where(from_coarse, candidate, w_network);
-    start_score = torch::where(from_coarse, candidate_score, start_score);
+    start_replaced = (candidate > 0) & (candidate_score > start_score);
+    w0 = torch::where(start_replaced, candidate, w_network);
+    start_score = torch::where(start_replaced, candidate_score, start_score);
   }
 
   // |dp_s/dw| = |b_xy a_z - a_xy b_z| / (a_z + w b_z)^2 (geometry.h): how far
@@ -334,7 +361,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                                 (best >= options.min_ncc) & (before > -1) & (after > -1) & (w_new > 0);
 
   torch::Tensor w_out = torch::where(refined, w_new, w0);
-  torch::Tensor changed = refined | from_coarse;  // updated in place by propagation
+  torch::Tensor changed = refined | start_replaced;  // updated in place by propagation
   torch::Tensor best_out = best;
   torch::Tensor output_score = torch::where(refined, best, start_score);
   // Propagation at full resolution: all of it at scale 1; after a coarse

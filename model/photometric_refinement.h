@@ -55,7 +55,7 @@
 // start of the full-resolution search wherever it correlates better at full
 // resolution on the same sources. The coarse passes reach further (a coarse
 // pixel is 2 or 4 pixels) at a quarter or a sixteenth of the cost, and the
-// full-resolution search needs fewer steps (3 by default) after them. Then
+// full-resolution search needs fewer steps (2 by default) after them. Then
 // options.full_resolution_rounds rounds (1 by default) propagate at full
 // resolution, with jumps of propagation_distance / scale pixels and
 // full_resolution_levels levels (16, 8): the coarse rounds find the
@@ -63,6 +63,15 @@
 // search's parabola between whole steps does not reach. Too small an image
 // for the coarse window (fewer than 2r + 2 coarse pixels a side)
 // propagates at full resolution instead (propagation_rounds rounds).
+//
+// The sweep (options.sweep_hypotheses > 0; 128 by default, depth_sweep.h):
+// before the search, where the search starts from the network's depth (on
+// the coarse grid with propagation_scale 2 or 4, else at full resolution),
+// constant inverse depths over the network's range are tried at every pixel
+// in the one source chosen at most pixels; the smoothed winner replaces the
+// network's depth as the start wherever it correlates better (on the chosen
+// sources, at least min_ncc, textured windows). It reaches surfaces the
+// network missed entirely, which neither the search nor propagation can.
 //
 // Runs without autograd on any device; images [B,V,3,H,W] as in
 // DispMvsInput (view 0 the reference), intrinsics in the pixel-index

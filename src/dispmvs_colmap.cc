@@ -363,6 +363,18 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        po::value<int64_t>(&o.photometric.estimator.refinement_options.full_resolution_levels)
            ->default_value(o.photometric.estimator.refinement_options.full_resolution_levels),
        "--refinement ncc: jumps per full-resolution round, each half the one before.")
+      ("refine_sweep_hypotheses",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.sweep_hypotheses)
+           ->default_value(o.photometric.estimator.refinement_options.sweep_hypotheses),
+       "--refinement ncc: at most this many constant depths tried at every pixel over the "
+       "network's depth range, in the source chosen most, before the search (on the coarse grid "
+       "with --refine_propagation_scale 2 or 4); their smoothed winner becomes the start where it "
+       "correlates better than the network's depth: the surfaces the network missed. 0 = off.")
+      ("refine_sweep_step_pixels",
+       po::value<double>(&o.photometric.estimator.refinement_options.sweep_step_pixels)
+           ->default_value(o.photometric.estimator.refinement_options.sweep_step_pixels),
+       "--refinement ncc: the sweep's spacing, pixels of that grid at the median pixel (fewer "
+       "hypotheses where refine_sweep_hypotheses would space them closer).")
       ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
            ->default_value(o.photometric.estimator.confidence),
        "The confidence maps: model (the probability that a pixel's depth is within 2 %, "

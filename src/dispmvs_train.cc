@@ -77,6 +77,9 @@ options (default):
   --eval_refine_full_resolution_rounds K
                               evaluation only, with ncc and scale 2 or 4: propagation rounds at full
                               resolution after the search (--refine_full_resolution_rounds)
+  --eval_refine_sweep_hypotheses K
+                              evaluation only, with ncc: the sweep's most depths, 0 = off
+                              (--refine_sweep_hypotheses)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -295,6 +298,9 @@ CommandLine Parse(int argc, char** argv) {
     }
     else if (flag == "--eval_refine_full_resolution_rounds") {
       o.eval_refinement_options.full_resolution_rounds = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_refine_sweep_hypotheses") {
+      o.eval_refinement_options.sweep_hypotheses = ParseInt(flag, value);
     }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
