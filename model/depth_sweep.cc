@@ -6,6 +6,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "model/geometry.h"
 #include "model/surface_ncc.h"
 #include "model/window_mean.h"
 
@@ -76,15 +77,10 @@ torch::Tensor SweepInverseDepth(const torch::Tensor& source, const torch::Tensor
   const torch::Tensor low =
       torch::where(have, start, torch::full_like(start, std::numeric_limits<float>::infinity())).amin({1, 2, 3}, true);
   const torch::Tensor high = torch::where(have, start, torch::zeros_like(start)).amax({1, 2, 3}, true);
-  // How far the match moves per unit of inverse depth at the start,
-  // |b_xy a_z - a_xy b_z| / (a_z + w b_z)^2 (geometry.h); its median over
-  // the usable pixels sets the spacing.
-  const torch::Tensor a_z = a.narrow(1, 2, 1), b_z = b.narrow(1, 2, 1);
-  const torch::Tensor along_x = b.narrow(1, 0, 1) * a_z - a.narrow(1, 0, 1) * b_z;
-  const torch::Tensor along_y = b.narrow(1, 1, 1) * a_z - a.narrow(1, 1, 1) * b_z;
-  const torch::Tensor denominator = a_z + start * b_z;
-  const torch::Tensor rate = torch::sqrt(along_x * along_x + along_y * along_y) / (denominator * denominator);
-  const torch::Tensor counts_rate = have & (denominator > 0) & torch::isfinite(rate);
+  // How far the match moves per unit of inverse depth at the start: its
+  // median over the usable pixels that have one sets the spacing.
+  const torch::Tensor rate = MatchShiftPerInverseDepth(EpipolarPair{a, b}, start);
+  const torch::Tensor counts_rate = have & (rate > 0);
   int64_t count = 0;
   for (int64_t item = 0; item < start.size(0); ++item) {
     const torch::Tensor rates = rate[item].masked_select(counts_rate[item]);

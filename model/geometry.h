@@ -68,6 +68,13 @@ struct EpipolarDirection {
 // direction does not depend on the unit of the scene.
 EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair);
 
+// How far the source pixel moves per unit of inverse depth at inv_depth
+// [B,1,H,W] (batch as the pair's): |dp_s/dw| = |b_xy a_z - a_xy b_z| /
+// (a_z + w b_z)^2, in source pixels. 0 where the point is not in front of
+// the source camera (a_z + w b_z <= 0) or the value is not finite. What
+// the photometric refinement spaces its hypotheses by. [B,1,H,W].
+torch::Tensor MatchShiftPerInverseDepth(const EpipolarPair& pair, const torch::Tensor& inv_depth);
+
 // The epipolar segment of every reference pixel in one source view: the
 // source pixels that a POSITIVE depth can project to, clipped to the source
 // image. It is defined by the cameras alone (no depth range):

@@ -324,6 +324,48 @@ TEST_P(GeometryPrecision, RandomScenesMatchEigen) {
       DtypeName({GetParam(), 0}).c_str(), tested, worst_depth, worst_direction, worst_pixel);
 }
 
+// |dp_s/dw| against Eigen: the samples' parallax |dp_s / d ln w| (a central
+// difference of two projections in double, h = 1e-6) over w. And 0 behind
+// the source.
+TEST(GeometryMatchShift, MatchesEigenDifferences) {
+  std::mt19937_64 rng(20261206);
+  int tested = 0;
+  double worst = 0;
+  for (int scene_index = 0; scene_index < 12; ++scene_index) {
+    const Scene scene = RandomScene(rng, LogUniform(rng, 1e-2, 1e2));
+    const std::vector<Sample> samples = ConditionedSamples(scene, rng, 100, 1e-15, 1e-9);
+    if (samples.empty()) continue;
+    const torch::Tensor inv_depth = SampleImage(scene, samples, 1, [](const Sample& s) {
+      return std::vector<double>{1.0 / s.depth};
+    });
+    const ImageReader shift(MatchShiftPerInverseDepth(scene.Pair(torch::kFloat64), inv_depth));
+    for (const Sample& s : samples) {
+      const double expected = s.parallax * s.depth;
+      const double error = std::abs(shift(0, s.y, s.x) / expected - 1.0);
+      // The difference itself is only as good as its two projections
+      // (rounded to ~eps_64 * C) over their distance (2e-6 of the parallax).
+      const double tolerance =
+          1e-9 + 16 * std::numeric_limits<double>::epsilon() * scene.LargestDimension() / (2e-6 * s.parallax);
+      EXPECT_LE(error, tolerance) << "scene " << scene_index << " pixel (" << s.x << "," << s.y << ")";
+      worst = std::max(worst, error / tolerance);
+      ++tested;
+    }
+  }
+  EXPECT_GE(tested, 100);
+  std::printf("[ match shift ] %d samples; worst relative error / tolerance %.3g\n", tested, worst);
+
+  // A source straight ahead of the reference (T = (0, 0, -2): the source
+  // camera 2 units further along the axis): depths under 2 lie behind it.
+  Scene ahead = RandomScene(rng, 1.0);
+  ahead.R = Matrix3d::Identity();
+  ahead.T = Vector3d(0, 0, -2);
+  const torch::Tensor w = torch::full({1, 1, ahead.ref_height, ahead.ref_width}, 1.0, torch::kFloat64);
+  EXPECT_TRUE(torch::equal(MatchShiftPerInverseDepth(ahead.Pair(torch::kFloat64), w), torch::zeros_like(w)));
+  // Depth 4 lies in front: the match moves, except at the epipole (the
+  // principal point, far from the corner).
+  EXPECT_GT(MatchShiftPerInverseDepth(ahead.Pair(torch::kFloat64), w * 0.25)[0][0][0][0].item<double>(), 0.0);
+}
+
 // (3) E-flow: base point and direction held fixed; E-flow -> pixel -> inverse
 // depth and pixel -> E-flow round trip exactly; |E-flow| is the distance Eigen
 // measures between the two projections, positive towards nearer points.

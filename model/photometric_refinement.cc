@@ -323,15 +323,8 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     start_score = torch::where(start_replaced, candidate_score, start_score);
   }
 
-  // |dp_s/dw| = |b_xy a_z - a_xy b_z| / (a_z + w b_z)^2 (geometry.h): how far
-  // the match moves per unit of inverse depth, in every source.
-  const torch::Tensor a_z = pair.a.narrow(1, 2, 1), b_z = pair.b.narrow(1, 2, 1);
-  const torch::Tensor along_x = pair.b.narrow(1, 0, 1) * a_z - pair.a.narrow(1, 0, 1) * b_z;
-  const torch::Tensor along_y = pair.b.narrow(1, 1, 1) * a_z - pair.a.narrow(1, 1, 1) * b_z;
-  const torch::Tensor denominator = a_z + w0.repeat_interleave(n, 0) * b_z;
-  // (Written out: LibTorch's norm over the channel dimension took ten times longer.)
-  torch::Tensor rate = torch::sqrt(along_x * along_x + along_y * along_y) / (denominator * denominator);
-  rate = torch::where((denominator > 0) & torch::isfinite(rate), rate, torch::zeros_like(rate));
+  // How far the match moves per unit of inverse depth, in every source.
+  const torch::Tensor rate = MatchShiftPerInverseDepth(pair, w0.repeat_interleave(n, 0));
   const torch::Tensor max_rate = rate.view({b, n, h, w}).amax(1, /*keepdim=*/true);
   const torch::Tensor searchable = usable & (max_rate > 0);
   const torch::Tensor dw = torch::where(searchable, options.step_pixels / max_rate,
