@@ -57,7 +57,7 @@ torch::Tensor WindowMedianLevel(const torch::Tensor& levels, const torch::Tensor
   for (int64_t level = 0; level < count && !found.all().item<bool>(); ++level) {
     const torch::Tensor at_or_below = counted * (levels <= level).to(torch::kFloat32);
     const torch::Tensor reached = ~found & (WindowMean(at_or_below, radius) >= half);
-    median = torch::where(reached, torch::full_like(median, level), median);
+    median.masked_fill_(reached, level);
     found = found | reached;
   }
   return median;
@@ -101,14 +101,14 @@ torch::Tensor SweepInverseDepth(const torch::Tensor& source, const torch::Tensor
     return low + span * ((k + 0.5) / static_cast<double>(count));
   };
   for (int64_t k = 0; k < count; ++k) {
-    const torch::Tensor level = torch::full({1, 1, 1, 1}, static_cast<double>(k), start.options());
-    const torch::Tensor surface = torch::where(have, hypothesis(level).expand_as(start), none);
+    // The constant surface where usable, 0 (none) elsewhere.
+    const torch::Tensor surface =
+        weights * hypothesis(torch::full({1, 1, 1, 1}, static_cast<double>(k), start.options()));
     const torch::Tensor score = WindowMean(
         ScoreAlongSurface(source, reference, reference_mean, reference_var, a, b, surface, weights, radius, margin),
         kSweepAggregationRadius);
-    const torch::Tensor better = score > best_score;
-    best = torch::where(better, torch::full_like(best, k), best);
-    best_score = torch::where(better, score, best_score);
+    best.masked_fill_(score > best_score, k);
+    best_score = torch::maximum(score, best_score);
   }
   // The median of the winners' levels (the hypotheses are monotonic in k),
   // over the usable pixels of each window.

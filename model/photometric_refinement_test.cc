@@ -246,9 +246,9 @@ TEST(PhotometricRefinementTest, DefaultsRepairTheBlockAtHalfResolution) {
   const PhotometricRefinement with_round = refine(no_sweep), without = refine(coarse_only);
   const torch::Tensor error = RelativeError(with_round.depth, scene.depth);
   const torch::Tensor error_without = RelativeError(without.depth, scene.depth);
-  // Measured: the block's median error 0.49 % (from 50 %; the search alone
-  // leaves 50 %; without the full-resolution round 1.13 %), all of it
-  // refined; the interior's median 0.50 % (without: 0.77 %, from 3 %).
+  // Measured: the block's median error 0.47 % (from 50 %; the search alone
+  // leaves 50 %; without the full-resolution round 1.07 %), all of it
+  // refined; the interior's median 0.53 % (without: 0.74 %, from 3 %).
   EXPECT_LT(error_without.masked_select(block).median().item<float>(), 0.03);
   EXPECT_LT(error.masked_select(block).median().item<float>(),
             0.6 * error_without.masked_select(block).median().item<float>());
@@ -258,9 +258,9 @@ TEST(PhotometricRefinementTest, DefaultsRepairTheBlockAtHalfResolution) {
             error_without.masked_select(Interior(6)).median().item<float>());
   EXPECT_LT(error_without.masked_select(Interior(6)).median().item<float>(), 0.012);
 
-  // The defaults, sweep on. Measured: the block's median 0.56 %, all of it
+  // The defaults, sweep on. Measured: the block's median 0.57 %, all of it
   // refined, the interior's 0.53 % (on this 24 x 32 coarse grid the sweep's
-  // 9 x 9 median is a third of the image; without the round 0.79 %).
+  // 9 x 9 median covers a third of the image).
   const PhotometricRefinement out = refine(defaults);
   const torch::Tensor error_defaults = RelativeError(out.depth, scene.depth);
   EXPECT_LT(error_defaults.masked_select(block).median().item<float>(), 0.008);
