@@ -127,7 +127,9 @@ constexpr const char* kUsage =
     "  --refine_full_resolution_levels K  with ncc: jumps per full-resolution round\n"
     "                           (dispmvs_colmap --refine_full_resolution_levels) (FULLLEVELS)\n"
     "  --refine_sweep_hypotheses K  with ncc: the sweep's most depths, 0 = off\n"
-    "                           (dispmvs_colmap --refine_sweep_hypotheses) (SWEEP)\n";
+    "                           (dispmvs_colmap --refine_sweep_hypotheses) (SWEEP)\n"
+    "  --refine_unseen_slope_radius R  with ncc: planes extended over pixels no source\n"
+    "                           sees, 0 = off (dispmvs_colmap --refine_unseen_slope_radius) (UNSEEN)\n";
 
 // kUsage with the refinement's defaults (dispmvs_colmap's) filled in.
 std::string Usage() {
@@ -143,6 +145,7 @@ std::string Usage() {
   fill("(FULLROUNDS)", defaults.full_resolution_rounds);
   fill("(FULLLEVELS)", defaults.full_resolution_levels);
   fill("(SWEEP)", defaults.sweep_hypotheses);
+  fill("(UNSEEN)", defaults.unseen_slope_radius);
   return usage;
 }
 
@@ -239,6 +242,8 @@ Options ParseArgs(int argc, char** argv) {
       o.refinement.full_resolution_levels = ParseInteger(flag, value, 1, 16);
     } else if (flag == "--refine_sweep_hypotheses") {
       o.refinement.sweep_hypotheses = ParseInteger(flag, value, 0, 1024);
+    } else if (flag == "--refine_unseen_slope_radius") {
+      o.refinement.unseen_slope_radius = ParseInteger(flag, value, 0, 64);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

@@ -10,6 +10,7 @@
 
 #include "dense/feature_cache.h"
 #include "model/confidence_model.h"
+#include "model/confident_plane_fill.h"
 #include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/host_allocator.h"
@@ -83,6 +84,11 @@ void EstimatorOptions::Check() const {
   } catch (const std::invalid_argument& error) {
     throw std::invalid_argument(std::string("--refine_* options: ") + error.what());
   }
+  try {
+    fill_options.Check();
+  } catch (const std::invalid_argument& error) {
+    throw std::invalid_argument(std::string("--fill_* options: ") + error.what());
+  }
 }
 
 struct DepthEstimator::Impl {
@@ -94,6 +100,7 @@ struct DepthEstimator::Impl {
   bool refine = false;
   model::PhotometricRefinementOptions refinement;
   model::ConfidenceModel confidence_model;  // empty: the network's confidence
+  model::ConfidentPlaneFillOptions fill;
 };
 
 DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::make_unique<Impl>()) {
@@ -127,6 +134,7 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   impl_->net->set_precision(impl_->precision);
   impl_->refine = model::ParseRefinementMode(options.refinement, "--refinement");
   impl_->refinement = options.refinement_options;
+  impl_->fill = options.fill_options;
 }
 
 DepthEstimator::~DepthEstimator() = default;
@@ -227,6 +235,7 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
     depth = refined.depth;
     if (UsesConfidenceModel()) {
       confidence = model::ConfidenceMap(impl_->confidence_model, output.confidence, refined);
+      if (impl_->fill.below > 0) depth = model::FillFromConfidentPlanes(depth, confidence, impl_->fill).depth;
     }
   }
   DepthEstimate estimate;

@@ -49,6 +49,10 @@ struct EstimatorOptions {
   // network's; or "network", the network's own (the softmax mass of its last
   // match around the peak).
   std::string confidence = "model";
+  // With the confidence model: pixels it gives little chance take the plane
+  // of the nearest confident pixel (model/confident_plane_fill.h); the
+  // confidence map keeps their low confidence. below = 0: off.
+  model::ConfidentPlaneFillOptions fill_options;
 
   // Throws std::invalid_argument naming the command-line option at fault.
   void Check() const;

@@ -251,6 +251,31 @@ torch::Tensor MatchShiftPerInverseDepth(const EpipolarPair& pair, const torch::T
   return torch::where((denominator > 0) & torch::isfinite(shift), shift, torch::zeros_like(shift));
 }
 
+torch::Tensor DistanceInsideSources(const EpipolarPair& pair, const torch::Tensor& w, int64_t sources,
+                                    int64_t height, int64_t width) {
+  if (sources < 1) throw std::invalid_argument("DistanceInsideSources: sources must be >= 1");
+  if (!w.defined() || w.dim() != 4 || w.size(1) != 1 || w.size(2) != height || w.size(3) != width) {
+    throw std::invalid_argument("DistanceInsideSources: w must be [B,1,height,width]");
+  }
+  const int64_t b = w.size(0);
+  if (!pair.a.defined() || pair.a.size(0) != b * sources || pair.a.size(2) != height || pair.a.size(3) != width) {
+    throw std::invalid_argument("DistanceInsideSources: the pair must hold B * sources pairs of w's size");
+  }
+  // The projection written out (K_s (R K_r^-1 p / w + T) ~ a + w b): one
+  // pass instead of ProjectInverseDepth's checks, which took 60 ms for
+  // four sources at 640x480; a match that is not finite compares false and
+  // counts as outside, as its invalid matches would.
+  const torch::Tensor p = torch::addcmul(pair.a, w.repeat_interleave(sources, 0), pair.b);
+  const torch::Tensor z = p.narrow(1, 2, 1);
+  const torch::Tensor x = p.narrow(1, 0, 1) / z, y = p.narrow(1, 1, 1) / z;
+  const torch::Tensor inside = torch::minimum(torch::minimum(x, (width - 1) - x), torch::minimum(y, (height - 1) - y));
+  const torch::Tensor in_front = (z > 0) & torch::isfinite(inside);
+  const double none = -std::numeric_limits<double>::infinity();
+  const torch::Tensor distance = torch::where(in_front, inside, torch::full_like(inside, none));
+  const torch::Tensor best = distance.view({b, sources, height, width}).amax(1, /*keepdim=*/true);
+  return torch::where(w > 0, best, torch::full_like(best, none));
+}
+
 EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair) {
   const CleanPair p(pair);
   const EpipolarGradient g = ComputeEpipolarGradient(p, RelativeTolerance(pair.a.scalar_type()));

@@ -75,6 +75,18 @@ EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair);
 // the photometric refinement spaces its hypotheses by. [B,1,H,W].
 torch::Tensor MatchShiftPerInverseDepth(const EpipolarPair& pair, const torch::Tensor& inv_depth);
 
+// How far inside the (height x width) image of its best-placed source the
+// match of each reference pixel at inverse depth `w` [B,1,H,W] lies: the
+// largest, over the `sources` sources of its batch item, of the match's
+// distance to the nearest image border (min(x, W-1-x, y, H-1-y), pixels;
+// negative outside), -inf where no source has the point in front of it or
+// w <= 0 (no depth). `pair` holds the B * sources pairs, batch item major.
+// "Some source sees the pixel, at least m pixels from its border" is
+// DistanceInsideSources(...) >= m. [B,1,H,W]. Throws std::invalid_argument
+// on mismatched shapes or sources < 1.
+torch::Tensor DistanceInsideSources(const EpipolarPair& pair, const torch::Tensor& w, int64_t sources,
+                                    int64_t height, int64_t width);
+
 // The epipolar segment of every reference pixel in one source view: the
 // source pixels that a POSITIVE depth can project to, clipped to the source
 // image. It is defined by the cameras alone (no depth range):

@@ -366,6 +366,55 @@ TEST(GeometryMatchShift, MatchesEigenDifferences) {
   EXPECT_GT(MatchShiftPerInverseDepth(ahead.Pair(torch::kFloat64), w * 0.25)[0][0][0][0].item<double>(), 0.0);
 }
 
+// DistanceInsideSources against projections by hand (Eigen, double): two sources
+// of a 30 x 40 reference, random inverse depths from 0.05 to 1.5, a few
+// without depth; both outcomes occur at both margins.
+TEST(GeometryDistanceInsideSources, MatchesProjectionsByHand) {
+  constexpr int64_t kH = 30, kW = 40;
+  Matrix3d K;
+  K << 35, 0, 19.5, 0, 33, 14.5, 0, 0, 1;
+  const Matrix3d K_src[2] = {K, Matrix3d(Eigen::DiagonalMatrix<double, 3>(1.1, 1.0, 1.0) * K)};
+  const Matrix3d R[2] = {Matrix3d::Identity(), Eigen::AngleAxisd(0.08, Vector3d::UnitY()).toRotationMatrix()};
+  const Vector3d T[2] = {Vector3d(-1.5, 0.1, 0.0), Vector3d(0.9, -0.6, 0.2)};
+  const EpipolarPair pair = MakeEpipolarPair(
+      torch::cat({MatrixTensor(K, torch::kFloat64), MatrixTensor(K, torch::kFloat64)}),
+      torch::cat({MatrixTensor(K_src[0], torch::kFloat64), MatrixTensor(K_src[1], torch::kFloat64)}),
+      torch::cat({MatrixTensor(R[0], torch::kFloat64), MatrixTensor(R[1], torch::kFloat64)}),
+      torch::tensor({T[0].x(), T[0].y(), T[0].z(), T[1].x(), T[1].y(), T[1].z()}, torch::kFloat64).view({2, 3}),
+      kH, kW);
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> uniform(0.05, 1.5);
+  torch::Tensor w = torch::zeros({1, 1, kH, kW}, torch::kFloat64);
+  for (int64_t i = 0; i < kH; ++i) {
+    for (int64_t j = 0; j < kW; ++j) w[0][0][i][j] = (i == 0 && j < 5) ? 0.0 : uniform(rng);
+  }
+  for (const double margin : {0.0, 4.0}) {
+    const torch::Tensor seen = DistanceInsideSources(pair, w, 2, kH, kW) >= margin;
+    ASSERT_EQ(seen.sizes(), torch::IntArrayRef({1, 1, kH, kW}));
+    int64_t some = 0, none = 0;
+    for (int64_t i = 0; i < kH; ++i) {
+      for (int64_t j = 0; j < kW; ++j) {
+        const double wij = w[0][0][i][j].item<double>();
+        bool expected = false;
+        for (int s = 0; s < 2 && wij > 0; ++s) {
+          const Vector3d X = R[s] * (K.inverse() * Vector3d(j, i, 1) / wij) + T[s];
+          if (X.z() <= 0) continue;
+          const Vector3d p = K_src[s] * X;
+          const double u = p.x() / p.z(), v = p.y() / p.z();
+          expected = expected || (u >= margin && u <= kW - 1 - margin && v >= margin && v <= kH - 1 - margin);
+        }
+        EXPECT_EQ(seen[0][0][i][j].item<bool>(), expected) << i << "," << j << " margin " << margin;
+        (expected ? some : none) += 1;
+      }
+    }
+    EXPECT_GT(some, 100);
+    EXPECT_GT(none, 100);
+  }
+  EXPECT_THROW(DistanceInsideSources(pair, w, 0, kH, kW), std::invalid_argument);
+  EXPECT_THROW(DistanceInsideSources(pair, w, 3, kH, kW), std::invalid_argument);
+  EXPECT_THROW(DistanceInsideSources(pair, w, 2, kH + 1, kW), std::invalid_argument);
+}
+
 // (3) E-flow: base point and direction held fixed; E-flow -> pixel -> inverse
 // depth and pixel -> E-flow round trip exactly; |E-flow| is the distance Eigen
 // measures between the two projections, positive towards nearer points.

@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
-#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -13,6 +12,7 @@
 #include "model/depth_sweep.h"
 #include "model/dispmvs_net.h"
 #include "model/geometry.h"
+#include "model/nearest_plane.h"
 #include "model/propagation_planes.h"
 #include "model/surface_ncc.h"
 #include "model/window_mean.h"
@@ -208,6 +208,7 @@ void PhotometricRefinementOptions::Check() const {
   if (full_resolution_levels < 1 || full_resolution_levels > 16) fail("full_resolution_levels must be in [1, 16]");
   if (sweep_hypotheses < 0 || sweep_hypotheses > 1024) fail("sweep_hypotheses must be in [0, 1024]");
   if (!(sweep_step_pixels > 0 && sweep_step_pixels <= 64)) fail("sweep_step_pixels must be in (0, 64]");
+  if (unseen_slope_radius < 0 || unseen_slope_radius > 64) fail("unseen_slope_radius must be in [0, 64]");
 }
 
 bool ParseRefinementMode(const std::string& value, const std::string& option) {
@@ -309,6 +310,9 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     coarse_options.step_pixels = 1.0;
     coarse_options.propagation_distance = std::max<int64_t>(1, options.propagation_distance / scale);
     coarse_options.propagation_slope_radius = std::max<int64_t>(1, options.propagation_slope_radius / scale);
+    // Only the full-resolution map extends planes over unseen pixels: the
+    // coarse pass's map is a candidate, taken where it correlates better.
+    coarse_options.unseen_slope_radius = 0;
     const PhotometricRefinement coarse_result = RefineDepthPhotometrically(
         coarse.images, coarse.intrinsics, extrinsics, coarse.depth, coarse.valid, coarse_options);
     // Inverse depth where the coarse pass changed it, 0 elsewhere (the
@@ -377,9 +381,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     // Candidates stay within the inverse depths the network gave this view:
     // a plane extrapolated over a long jump can reach inverse depths near 0,
     // depths without bound, where no surface was seen.
-    const torch::Tensor w_floor =
-        torch::where(usable, w0, torch::full_like(w0, std::numeric_limits<float>::infinity())).amin({1, 2, 3}, true);
-    const torch::Tensor w_ceiling = w0.amax({1, 2, 3}, true);
+    const auto [w_floor, w_ceiling] = InverseDepthBounds(w0, usable);
     torch::Tensor current = surface_score(w_out);
     for (int64_t round = 0; round < fine_rounds; ++round) {
       int64_t distance = fine_distance;
@@ -395,6 +397,29 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     }
     best_out = torch::where(changed, current, best_out);
     output_score = current;
+  }
+  if (options.unseen_slope_radius > 0) {
+    // Pixels no source sees at their depth (nearest_plane.h): the plane of
+    // the nearest refined pixel that a source sees well inside its image
+    // (the last few pixels before a source's border were not refined: their
+    // windows leave the image), kept within the inverse depths the network
+    // gave the view (as propagation's candidates are).
+    const torch::Tensor inside = DistanceInsideSources(pair, w_out, n, h, w);
+    const torch::Tensor unseen = usable & ~(inside >= 0);
+    // Most views of a capture with several sources have none: then nothing
+    // more to compute.
+    if (unseen.any().item<bool>()) {
+      const torch::Tensor anchor = changed & (inside >= kUnseenAnchorMargin);
+      const auto [low, high] = InverseDepthBounds(w_network, usable);
+      const torch::Tensor w_extended = ExtendTrustedPlanes(w_out, anchor, options.unseen_slope_radius, low, high);
+      const torch::Tensor take = unseen & (w_extended > 0) &
+                                 ((w_extended / torch::where(usable, w_out, torch::ones_like(w_out)) - 1).abs() <=
+                                  kUnseenMaxChange);
+      w_out = torch::where(take, w_extended, w_out);
+      changed = changed | take;
+      // No source scores the extended depth.
+      output_score = torch::where(take, torch::full_like(output_score, -1.0), output_score);
+    }
   }
 
   PhotometricRefinement result;

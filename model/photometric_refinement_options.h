@@ -16,7 +16,13 @@ struct PhotometricRefinementOptions {
   int64_t steps = 2;
   double step_pixels = 1.0;   // their spacing in the source with most parallax, pixels
   double min_ncc = 0.2;       // the best score needed to replace the network's depth
-  double min_texture = 0.01;  // the reference window's grey-value std needed (images in [0, 1])
+  // The reference window's grey-value standard deviation needed (images in
+  // [0, 1]). 0.005 (about 1.3 grey levels of an 8-bit image) since the
+  // seventh session, 0.01 before: fine real texture such as carpet varies
+  // by less than 0.01 over 7x7 pixels and still correlates (realval's MVS
+  // pairs within 2 % 0.581 against 0.577, mvs_001 0.621 against 0.560; the
+  // 20 generated scenes 0.5077 against 0.5050; docs/dense.md).
+  double min_texture = 0.005;
   // Propagation (photometric_refinement.h), 0 rounds = off:
   // candidates are the planes of the pixels `propagation_distance`, half
   // that, ... (`propagation_levels` jumps) away in four directions, their
@@ -61,13 +67,45 @@ struct PhotometricRefinementOptions {
   // bf16, against 1.30-1.36x and 1.38-1.40x (docs/dense.md, "The sweep").
   int64_t sweep_hypotheses = 128;
   double sweep_step_pixels = 2.0;
+  // Pixels no source sees at the refined depth (nearest_plane.h), 0 = off:
+  // the plane of the nearest refined pixel that some source sees at least
+  // kUnseenAnchorMargin pixels inside its image, its slopes fitted over the
+  // (2 unseen_slope_radius + 1)^2 such pixels around it, extended over them
+  // where its inverse depth is within kUnseenMaxChange of the network's
+  // (photometric_refinement.h). realval's MVS pairs within 2 % 0.584
+  // against 0.581 without, the mean relative error unchanged (docs/dense.md,
+  // "Fine texture, and pixels no source sees").
+  int64_t unseen_slope_radius = 16;
 
   // Throws std::invalid_argument naming the field: radius in [1, 15], steps
   // in [1, 64], step_pixels in (0, 8], min_ncc in [-1, 1], min_texture >= 0,
   // propagation rounds in [0, 16], distance in [1, 256], levels in [1, 16],
   // slope radius in [1, 64], scale 1, 2 or 4, full-resolution rounds in
   // [0, 16] and levels in [1, 16], sweep hypotheses in [0, 1024] and step
-  // pixels in (0, 64].
+  // pixels in (0, 64], unseen slope radius in [0, 64].
+  void Check() const;
+};
+
+// The settings of the plane fill after the confidence model
+// (confident_plane_fill.h), here for the same reason.
+struct ConfidentPlaneFillOptions {
+  // Pixels whose confidence (the probability that the depth is within 2 %)
+  // is below `below` take the plane of the nearest pixel whose confidence
+  // is at least `anchor`, its slopes fitted over the (2 slope_radius + 1)^2
+  // such pixels around it; with max_change > 0 only where that plane's
+  // inverse depth differs from theirs by at most max_change (relative).
+  // below 0 (the default) = off: it is a prior of large planes, which wins
+  // on realval's photographs of buildings and rooms (within 2 % 0.626
+  // against 0.584 with below 0.5) and loses on the generated scenes of
+  // separate objects (0.422 against 0.508; docs/dense.md, "Filling from
+  // confident planes").
+  double below = 0.0;
+  double anchor = 0.7;
+  int64_t slope_radius = 16;
+  double max_change = 0.0;  // 0: any change
+
+  // Throws std::invalid_argument naming the field: below in [0, 1), anchor
+  // in (below, 1], slope_radius in [1, 64], max_change >= 0.
   void Check() const;
 };
 

@@ -375,12 +375,43 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
            ->default_value(o.photometric.estimator.refinement_options.sweep_step_pixels),
        "--refinement ncc: the sweep's spacing, pixels of that grid at the median pixel (fewer "
        "hypotheses where refine_sweep_hypotheses would space them closer).")
+      ("refine_unseen_slope_radius",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.unseen_slope_radius)
+           ->default_value(o.photometric.estimator.refinement_options.unseen_slope_radius),
+       "--refinement ncc: where no source sees a pixel at its refined depth (its match outside "
+       "every source image), extend the plane of the nearest pixel a source sees, its slopes "
+       "fitted over (2R+1)^2 such pixels; 0 = off (the network's depth stays there).")
       ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
            ->default_value(o.photometric.estimator.confidence),
        "The confidence maps: model (the probability that a pixel's depth is within 2 %, "
        "from the network's confidence and the refinement's correlation and texture, by the "
        "confidence model the weights carry; where they carry none, or with --refinement none, "
        "the network's) or network (the network's own: how peaked its last match was).")
+      ("fill_below_confidence",
+       po::value<double>(&o.photometric.estimator.fill_options.below)
+           ->default_value(o.photometric.estimator.fill_options.below,
+                           FormatDefault(o.photometric.estimator.fill_options.below)),
+       "With --confidence model: pixels whose confidence is below this take the plane of the "
+       "nearest pixel with at least --fill_anchor_confidence, extended over them (their "
+       "confidence stays low). A prior of large planes, for buildings and rooms (0.5: real "
+       "photographs' pixels within 2 % 0.626 against 0.585; scenes of small separate objects "
+       "lose); 0 = off, the refined depth everywhere.")
+      ("fill_anchor_confidence",
+       po::value<double>(&o.photometric.estimator.fill_options.anchor)
+           ->default_value(o.photometric.estimator.fill_options.anchor,
+                           FormatDefault(o.photometric.estimator.fill_options.anchor)),
+       "The confidence a pixel needs to lend its plane to --fill_below_confidence's pixels.")
+      ("fill_slope_radius",
+       po::value<int64_t>(&o.photometric.estimator.fill_options.slope_radius)
+           ->default_value(o.photometric.estimator.fill_options.slope_radius),
+       "The fill's planes: slopes fitted over (2R+1)^2 confident pixels.")
+      ("fill_max_change",
+       po::value<double>(&o.photometric.estimator.fill_options.max_change)
+           ->default_value(o.photometric.estimator.fill_options.max_change,
+                           FormatDefault(o.photometric.estimator.fill_options.max_change)),
+       "The fill replaces a depth only where the plane's inverse depth differs from it by at "
+       "most this, relative (it snaps roughly right depths onto the confident surface, and does "
+       "not move pixels onto another one); 0 = any change.")
       ("threads", po::value<int>(&o.photometric.estimator.threads)->default_value(0),
        "CPU threads for the network; 0 = one per core.")
       ("seed", po::value<uint64_t>(&o.photometric.seed)->default_value(0),

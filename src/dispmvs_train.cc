@@ -68,6 +68,8 @@ options (default):
   --eval_refine_steps K       evaluation only, with ncc: hypotheses on each side (dispmvs_colmap
                               --refine_steps)
   --eval_refine_min_ncc C     evaluation only, with ncc: correlation needed (--refine_min_ncc)
+  --eval_refine_min_texture T evaluation only, with ncc: the reference window's grey-value standard
+                              deviation needed (--refine_min_texture)
   --eval_refine_propagation_rounds K
                               evaluation only, with ncc: rounds of propagation
                               (--refine_propagation_rounds)
@@ -80,6 +82,18 @@ options (default):
   --eval_refine_sweep_hypotheses K
                               evaluation only, with ncc: the sweep's most depths, 0 = off
                               (--refine_sweep_hypotheses)
+  --eval_fill_below_confidence C
+                              evaluation only, with ncc and weights that carry a confidence model:
+                              pixels below C take the nearest confident pixel's plane, 0 = off
+                              (dispmvs_colmap --fill_below_confidence) (0)
+  --eval_fill_anchor_confidence C
+                              evaluation only: the confidence a pixel needs to lend its plane
+                              (dispmvs_colmap --fill_anchor_confidence)
+  --eval_fill_max_change R    evaluation only: the largest relative change of inverse depth the
+                              fill makes, 0 = any (dispmvs_colmap --fill_max_change) (0)
+  --eval_refine_unseen_slope_radius R
+                              evaluation only, with ncc: planes extended over pixels no source sees,
+                              0 = off (--refine_unseen_slope_radius)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -290,6 +304,9 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--eval_refinement") o.eval_refinement = value;
     else if (flag == "--eval_refine_steps") o.eval_refinement_options.steps = ParseInt(flag, value);
     else if (flag == "--eval_refine_min_ncc") o.eval_refinement_options.min_ncc = ParseDouble(flag, value);
+    else if (flag == "--eval_refine_min_texture") {
+      o.eval_refinement_options.min_texture = ParseDouble(flag, value);
+    }
     else if (flag == "--eval_refine_propagation_rounds") {
       o.eval_refinement_options.propagation_rounds = ParseInt(flag, value);
     }
@@ -301,6 +318,18 @@ CommandLine Parse(int argc, char** argv) {
     }
     else if (flag == "--eval_refine_sweep_hypotheses") {
       o.eval_refinement_options.sweep_hypotheses = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_fill_below_confidence") {
+      o.eval_fill_options.below = ParseDouble(flag, value);
+    }
+    else if (flag == "--eval_fill_anchor_confidence") {
+      o.eval_fill_options.anchor = ParseDouble(flag, value);
+    }
+    else if (flag == "--eval_fill_max_change") {
+      o.eval_fill_options.max_change = ParseDouble(flag, value);
+    }
+    else if (flag == "--eval_refine_unseen_slope_radius") {
+      o.eval_refinement_options.unseen_slope_radius = ParseInt(flag, value);
     }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);

@@ -166,6 +166,7 @@ void TrainOptions::Check(bool for_training) const {
     fail("eval_refinement is for evaluation only");
   }
   eval_refinement_options.Check();
+  eval_fill_options.Check();
   try {
     model::ResolvePrecision(precision, torch::kCPU);
   } catch (const std::invalid_argument& error) {
@@ -461,7 +462,14 @@ std::pair<DispMvsNet, std::vector<synth::SynthSample>> LoadForEvaluation(
 std::vector<WideningResult> EvaluateWeights(const std::string& weights_path, const TrainOptions& options,
                                             const std::vector<double>& widenings) {
   auto [net, scenes] = LoadForEvaluation(weights_path, options);
-  return Validate(net, scenes, options, widenings, /*look_from_sources=*/true);
+  // The plane fill reads the confidence model the weights carry (none: no
+  // fill, as in dispmvs_colmap).
+  model::ConfidenceModel fill_model;
+  if (options.eval_refinement == "ncc" && options.eval_fill_options.below > 0) {
+    fill_model = model::ReadConfidenceModel(weights_path);
+  }
+  return Validate(net, scenes, options, widenings, /*look_from_sources=*/true,
+                  fill_model.empty() ? nullptr : &fill_model);
 }
 
 ConfidenceFit FitConfidence(const std::string& weights_path, const TrainOptions& options,

@@ -124,6 +124,10 @@ struct TrainOptions {
   // model/photometric_refinement.h, with these settings).
   std::string eval_refinement = "none";
   model::PhotometricRefinementOptions eval_refinement_options;
+  // Evaluation only (EvaluateWeights), with ncc and weights that carry a
+  // confidence model: the plane fill after it (model/confident_plane_fill.h,
+  // dispmvs_colmap --fill_*, the same defaults); below = 0 leaves it off.
+  model::ConfidentPlaneFillOptions eval_fill_options;
   // The arithmetic of the GRU update's convolutions, "fp32", "bf16" or
   // "auto" (model/precision.h). In evaluation: what bf16 costs in accuracy.
   // In training: the forward and backward passes of those convolutions, about

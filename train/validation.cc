@@ -6,6 +6,8 @@
 #include <string>
 #include <utility>
 
+#include "model/confidence_model.h"
+#include "model/confident_plane_fill.h"
 #include "model/matching_loss.h"
 #include "model/photometric_refinement.h"
 #include "train/batch.h"
@@ -46,7 +48,8 @@ std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vec
 // validations log only the first line) also `seen`, `seen_share` and
 // `source_pixels` (source_pixel_metrics.h).
 WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
-                             const TrainOptions& options, double widening, bool look_from_sources) {
+                             const TrainOptions& options, double widening, bool look_from_sources,
+                             const model::ConfidenceModel* fill_model) {
   CheckHintAvailable(net, widening, "no 'none' row for them");
   const bool was_training = net->is_training();
   net->eval();
@@ -59,8 +62,13 @@ WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSamp
     // between evaluations only because the weights do.
     auto output = net->forward(batch.input, CpuGenerator(options.validation_seed_base + i));
     if (options.eval_refinement == "ncc") {
-      output.depth =
-          model::RefineDepthPhotometrically(batch.input, output, options.eval_refinement_options).depth;
+      const model::PhotometricRefinement refined =
+          model::RefineDepthPhotometrically(batch.input, output, options.eval_refinement_options);
+      output.depth = refined.depth;
+      if (fill_model != nullptr) {
+        const torch::Tensor confidence = model::ConfidenceMap(*fill_model, output.confidence, refined);
+        output.depth = model::FillFromConfidentPlanes(output.depth, confidence, options.eval_fill_options).depth;
+      }
     }
     sums += SumValidationDepth(output.depth, output.valid, batch.gt_depth, batch.gt_valid);
     if (!look_from_sources) continue;
@@ -104,10 +112,10 @@ std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, to
 
 std::vector<WideningResult> Validate(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
                                      const TrainOptions& options, const std::vector<double>& widenings,
-                                     bool look_from_sources) {
+                                     bool look_from_sources, const model::ConfidenceModel* fill_model) {
   std::vector<WideningResult> results;
   for (double x : widenings) {
-    results.push_back(ValidateDepth(net, scenes, options, x, look_from_sources));
+    results.push_back(ValidateDepth(net, scenes, options, x, look_from_sources, fill_model));
   }
   const auto [top1, counted] = CoarseMatchingAccuracy(net, scenes);
   for (auto& row : results) {

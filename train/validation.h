@@ -13,6 +13,7 @@
 
 #include <torch/torch.h>
 
+#include "model/confidence_model.h"
 #include "model/dispmvs_net.h"
 #include "synth/generator.h"
 #include "train/trainer.h"
@@ -31,8 +32,11 @@ void CheckHintAvailable(model::DispMvsNet& net, double widening, const std::stri
 std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, torch::Device device);
 
 // One table row per widening; the coarse accuracy measured once for all.
+// With `fill_model` (and eval_refinement ncc): the refined depth filled from
+// confident planes by options.eval_fill_options, the confidence by that
+// model (model/confident_plane_fill.h).
 std::vector<WideningResult> Validate(model::DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
                                      const TrainOptions& options, const std::vector<double>& widenings,
-                                     bool look_from_sources);
+                                     bool look_from_sources, const model::ConfidenceModel* fill_model = nullptr);
 
 }  // namespace dispmvs::train::internal
