@@ -4,6 +4,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "model/geometry.h"
 #include "model/nearest_plane.h"
 
 namespace dispmvs::model {
@@ -35,12 +36,9 @@ ConfidentPlaneFill FillFromConfidentPlanes(const torch::Tensor& depth, const tor
   const torch::Tensor anchor = has & (c >= options.anchor);
   // Within the inverse depths of the map's own pixels.
   const auto [low, high] = InverseDepthBounds(w, has);
-  const torch::Tensor w_filled = ExtendTrustedPlanes(w, anchor, options.slope_radius, low, high);
+  const torch::Tensor w_filled = ExtendTrustedPlanes(w, anchor, options.slope_radius, low, high, options.max_change);
   ConfidentPlaneFill result;
   result.filled = has & (c < options.below) & (w_filled > 0);
-  if (options.max_change > 0) {
-    result.filled &= (w_filled / torch::where(has, w, torch::ones_like(w)) - 1).abs() <= options.max_change;
-  }
   result.depth = torch::where(result.filled, w_filled.reciprocal(), d).to(depth.scalar_type());
   return result;
 }

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
 #include <stdexcept>
 #include <string>
 
@@ -74,9 +73,7 @@ torch::Tensor SweepInverseDepth(const torch::Tensor& source, const torch::Tensor
   const torch::Tensor none = torch::zeros_like(start);
   const torch::Tensor have = usable & (start > 0) & torch::isfinite(start);
   // The range: the start's inverse depths, per batch item.
-  const torch::Tensor low =
-      torch::where(have, start, torch::full_like(start, std::numeric_limits<float>::infinity())).amin({1, 2, 3}, true);
-  const torch::Tensor high = torch::where(have, start, torch::zeros_like(start)).amax({1, 2, 3}, true);
+  const auto [low, high] = InverseDepthBounds(start, have);
   // How far the match moves per unit of inverse depth at the start: its
   // median over the usable pixels that have one sets the spacing.
   const torch::Tensor rate = MatchShiftPerInverseDepth(EpipolarPair{a, b}, start);

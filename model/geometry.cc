@@ -251,6 +251,13 @@ torch::Tensor MatchShiftPerInverseDepth(const EpipolarPair& pair, const torch::T
   return torch::where((denominator > 0) & torch::isfinite(shift), shift, torch::zeros_like(shift));
 }
 
+std::pair<torch::Tensor, torch::Tensor> InverseDepthBounds(const torch::Tensor& w, const torch::Tensor& usable) {
+  const torch::Tensor low =
+      torch::where(usable, w, torch::full_like(w, std::numeric_limits<float>::infinity())).amin({1, 2, 3}, true);
+  const torch::Tensor high = torch::where(usable, w, torch::zeros_like(w)).amax({1, 2, 3}, true);
+  return {low, high};
+}
+
 torch::Tensor DistanceInsideSources(const EpipolarPair& pair, const torch::Tensor& w, int64_t sources,
                                     int64_t height, int64_t width) {
   if (sources < 1) throw std::invalid_argument("DistanceInsideSources: sources must be >= 1");

@@ -27,6 +27,8 @@
 // float32 and float64 both work; tensors may live on any device (all inputs of
 // one call on the same device, with the same dtype).
 
+#include <utility>
+
 #include <torch/torch.h>
 
 namespace dispmvs::model {
@@ -74,6 +76,13 @@ EpipolarDirection ComputeEpipolarDirection(const EpipolarPair& pair);
 // the source camera (a_z + w b_z <= 0) or the value is not finite. What
 // the photometric refinement spaces its hypotheses by. [B,1,H,W].
 torch::Tensor MatchShiftPerInverseDepth(const EpipolarPair& pair, const torch::Tensor& inv_depth);
+
+// Per batch item, the smallest and the largest inverse depth of the
+// `usable` pixels of w (both [B,1,H,W]), each [B,1,1,1] (+inf and 0 for an
+// item without usable pixels): the range a map's candidates stay within
+// (a plane extended far reaches inverse depths near 0, depths without
+// bound, where no surface was seen).
+std::pair<torch::Tensor, torch::Tensor> InverseDepthBounds(const torch::Tensor& w, const torch::Tensor& usable);
 
 // How far inside the (height x width) image of its best-placed source the
 // match of each reference pixel at inverse depth `w` [B,1,H,W] lies: the

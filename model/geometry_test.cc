@@ -366,6 +366,19 @@ TEST(GeometryMatchShift, MatchesEigenDifferences) {
   EXPECT_GT(MatchShiftPerInverseDepth(ahead.Pair(torch::kFloat64), w * 0.25)[0][0][0][0].item<double>(), 0.0);
 }
 
+TEST(GeometryInverseDepthBounds, AreOverTheUsablePixels) {
+  torch::Tensor w = torch::tensor({0.5f, 0.2f, 0.9f, 0.0f, 3.0f, 0.1f, 0.4f, 0.7f}).view({2, 1, 2, 2});
+  torch::Tensor usable = w > 0;
+  usable[0][0][1][0] = false;  // 0.9 is not usable
+  usable[1].fill_(false);      // an item without usable pixels
+  const auto [low, high] = InverseDepthBounds(w, usable);
+  ASSERT_EQ(low.sizes(), torch::IntArrayRef({2, 1, 1, 1}));
+  EXPECT_FLOAT_EQ(low[0].item<float>(), 0.2f);
+  EXPECT_FLOAT_EQ(high[0].item<float>(), 0.5f);
+  EXPECT_TRUE(std::isinf(low[1].item<float>()));
+  EXPECT_EQ(high[1].item<float>(), 0.0f);
+}
+
 // DistanceInsideSources against projections by hand (Eigen, double): two sources
 // of a 30 x 40 reference, random inverse depths from 0.05 to 1.5, a few
 // without depth; both outcomes occur at both margins.

@@ -1,12 +1,11 @@
 #include "model/nearest_plane.h"
 
-#include "model/propagation_planes.h"
-
 #include <cstdint>
-#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
+
+#include "model/propagation_planes.h"
 
 namespace dispmvs::model {
 namespace {
@@ -77,20 +76,18 @@ torch::Tensor ExtendNearestPlane(const torch::Tensor& w, const torch::Tensor& gx
   return torch::where(has, extended, torch::zeros_like(extended));
 }
 
-std::pair<torch::Tensor, torch::Tensor> InverseDepthBounds(const torch::Tensor& w, const torch::Tensor& usable) {
-  const torch::Tensor low =
-      torch::where(usable, w, torch::full_like(w, std::numeric_limits<float>::infinity())).amin({1, 2, 3}, true);
-  const torch::Tensor high = torch::where(usable, w, torch::zeros_like(w)).amax({1, 2, 3}, true);
-  return {low, high};
-}
-
 torch::Tensor ExtendTrustedPlanes(const torch::Tensor& w, const torch::Tensor& trusted, int64_t slope_radius,
-                                  const torch::Tensor& low, const torch::Tensor& high) {
+                                  const torch::Tensor& low, const torch::Tensor& high, double max_change) {
   const auto [gx, gy] = LeastSquaresSlopes(w, trusted, slope_radius);
   const torch::Tensor nearest = NearestAnchor(trusted);
   const torch::Tensor extended = ExtendNearestPlane(w, gx, gy, nearest);
-  return torch::where((nearest >= 0) & (extended > 0), torch::minimum(torch::maximum(extended, low), high),
-                      torch::zeros_like(w));
+  const torch::Tensor bounded = torch::minimum(torch::maximum(extended, low), high);
+  torch::Tensor keep = (nearest >= 0) & (extended > 0);
+  if (max_change > 0) {
+    const torch::Tensor has = w > 0;
+    keep &= ~has | ((bounded / torch::where(has, w, torch::ones_like(w)) - 1).abs() <= max_change);
+  }
+  return torch::where(keep, bounded, torch::zeros_like(w));
 }
 
 }  // namespace dispmvs::model

@@ -16,11 +16,11 @@
 //
 //  * NearestAnchor: for every pixel, the nearest pixel of a mask;
 //  * ExtendNearestPlane: that pixel's plane extended to the pixel;
-//  * ExtendTrustedPlanes: both, with the slopes fitted over trusted pixels
-//    and the result kept within bounds (InverseDepthBounds).
+//  * ExtendTrustedPlanes: both, with the slopes fitted over trusted pixels,
+//    the result kept within bounds (InverseDepthBounds, geometry.h) and,
+//    optionally, near each pixel's own depth.
 
 #include <cstdint>
-#include <utility>
 
 #include <torch/torch.h>
 
@@ -41,19 +41,14 @@ torch::Tensor NearestAnchor(const torch::Tensor& anchor);
 torch::Tensor ExtendNearestPlane(const torch::Tensor& w, const torch::Tensor& gx, const torch::Tensor& gy,
                                  const torch::Tensor& nearest);
 
-// Per batch item, the smallest and the largest inverse depth of the
-// `usable` pixels of w (both [B,1,H,W]), each [B,1,1,1] (+inf and 0 for an
-// item without usable pixels): the range a map's candidates stay within
-// (a plane extended far reaches inverse depths near 0, depths without
-// bound, where no surface was seen).
-std::pair<torch::Tensor, torch::Tensor> InverseDepthBounds(const torch::Tensor& w, const torch::Tensor& usable);
-
 // At every pixel, the plane of the nearest `trusted` pixel of w (its slopes
 // fitted over the (2 slope_radius + 1)^2 trusted pixels around it,
 // LeastSquaresSlopes), kept within [low, high] ([B,1,1,1]); 0 where the
-// plane is not positive (it passes behind the camera) and in an image
-// without trusted pixels. w [B,1,H,W] float, trusted [B,1,H,W] bool.
+// plane is not positive (it passes behind the camera), in an image without
+// trusted pixels, and, with max_change > 0, where the pixel has a depth
+// (w > 0) and the plane's inverse depth differs from it by more than
+// max_change (relative). w [B,1,H,W] float, trusted [B,1,H,W] bool.
 torch::Tensor ExtendTrustedPlanes(const torch::Tensor& w, const torch::Tensor& trusted, int64_t slope_radius,
-                                  const torch::Tensor& low, const torch::Tensor& high);
+                                  const torch::Tensor& low, const torch::Tensor& high, double max_change);
 
 }  // namespace dispmvs::model

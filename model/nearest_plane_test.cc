@@ -62,19 +62,6 @@ TEST(NearestPlaneTest, ExtendNearestPlaneIsExactOnAPlane) {
   EXPECT_EQ(none.abs().max().item<float>(), 0.0f);
 }
 
-TEST(NearestPlaneTest, InverseDepthBoundsAreOverTheUsablePixels) {
-  torch::Tensor w = torch::tensor({0.5f, 0.2f, 0.9f, 0.0f, 3.0f, 0.1f, 0.4f, 0.7f}).view({2, 1, 2, 2});
-  torch::Tensor usable = w > 0;
-  usable[0][0][1][0] = false;  // 0.9 is not usable
-  usable[1].fill_(false);      // an item without usable pixels
-  const auto [low, high] = InverseDepthBounds(w, usable);
-  ASSERT_EQ(low.sizes(), torch::IntArrayRef({2, 1, 1, 1}));
-  EXPECT_FLOAT_EQ(low[0].item<float>(), 0.2f);
-  EXPECT_FLOAT_EQ(high[0].item<float>(), 0.5f);
-  EXPECT_TRUE(std::isinf(low[1].item<float>()));
-  EXPECT_EQ(high[1].item<float>(), 0.0f);
-}
-
 TEST(NearestPlaneTest, ExtendTrustedPlanesStopsAtTheBoundsAndBehindTheCamera) {
   // w = 0.3 - 0.01 x from trusted columns 0-9: the plane falls to 0 at
   // column 30 and below beyond; within [0.1, 0.3] it is the plane, below
@@ -85,7 +72,7 @@ TEST(NearestPlaneTest, ExtendTrustedPlanesStopsAtTheBoundsAndBehindTheCamera) {
   const torch::Tensor trusted = x < 10;
   const torch::Tensor low = torch::full({1, 1, 1, 1}, 0.1f), high = torch::full({1, 1, 1, 1}, 0.3f);
   const torch::Tensor extended =
-      ExtendTrustedPlanes(torch::where(trusted, plane, torch::zeros_like(plane)), trusted, 4, low, high);
+      ExtendTrustedPlanes(torch::where(trusted, plane, torch::zeros_like(plane)), trusted, 4, low, high, 0.0);
   const torch::Tensor expected =
       torch::where(x > 30, torch::zeros_like(plane), torch::clamp(plane, 0.1, 0.3));
   EXPECT_LT((extended - expected).abs().masked_select(x != 30).max().item<float>(), 1e-5f);

@@ -411,10 +411,9 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     if (unseen.any().item<bool>()) {
       const torch::Tensor anchor = changed & (inside >= kUnseenAnchorMargin);
       const auto [low, high] = InverseDepthBounds(w_network, usable);
-      const torch::Tensor w_extended = ExtendTrustedPlanes(w_out, anchor, options.unseen_slope_radius, low, high);
-      const torch::Tensor take = unseen & (w_extended > 0) &
-                                 ((w_extended / torch::where(usable, w_out, torch::ones_like(w_out)) - 1).abs() <=
-                                  kUnseenMaxChange);
+      const torch::Tensor w_extended =
+          ExtendTrustedPlanes(w_out, anchor, options.unseen_slope_radius, low, high, kUnseenMaxChange);
+      const torch::Tensor take = unseen & (w_extended > 0);
       w_out = torch::where(take, w_extended, w_out);
       changed = changed | take;
       // No source scores the extended depth.

@@ -443,9 +443,10 @@ TEST(PhotometricRefinementTest, ExtendsThePlaneOverWhatNoSourceSees) {
   // 8 columns inside the seen part) from slopes fitted over up to 33 x 33
   // refined pixels, whose own depth carries the search's bias between whole
   // steps (median 0.27 % here). Measured: median 0.73 %, worst 0.84 %, from
-  // 20 %.
+  // 20 %. Required: every such pixel within the 2 % the product is judged
+  // by, most within 1 %.
   EXPECT_LT(error_on.masked_select(near_off).median().item<float>(), 0.01f);
-  EXPECT_LT(error_on.masked_select(near_off).max().item<float>(), 0.012f);
+  EXPECT_LT(error_on.masked_select(near_off).max().item<float>(), 0.02f);
   EXPECT_TRUE(extended.refined.masked_select(near_off).all().item<bool>());
   EXPECT_TRUE((extended.output_score.masked_select(near_off) == -1).all().item<bool>());
   // Too far from the plane to be a guess of it: kept.
