@@ -129,7 +129,9 @@ constexpr const char* kUsage =
     "  --refine_sweep_hypotheses K  with ncc: the sweep's most depths, 0 = off\n"
     "                           (dispmvs_colmap --refine_sweep_hypotheses) (SWEEP)\n"
     "  --refine_unseen_slope_radius R  with ncc: planes extended over pixels no source\n"
-    "                           sees, 0 = off (dispmvs_colmap --refine_unseen_slope_radius) (UNSEEN)\n";
+    "                           sees, 0 = off (dispmvs_colmap --refine_unseen_slope_radius) (UNSEEN)\n"
+    "  --refine_trusted_plane_ncc C  with ncc: long-range planes from pixels with NCC >= C,\n"
+    "                           0 = off (dispmvs_colmap --refine_trusted_plane_ncc) (TRUSTED)\n";
 
 // kUsage with the refinement's defaults (dispmvs_colmap's) filled in.
 std::string Usage() {
@@ -146,6 +148,9 @@ std::string Usage() {
   fill("(FULLLEVELS)", defaults.full_resolution_levels);
   fill("(SWEEP)", defaults.sweep_hypotheses);
   fill("(UNSEEN)", defaults.unseen_slope_radius);
+  std::ostringstream trusted;
+  trusted << "(" << defaults.trusted_plane_min_ncc << ")";
+  usage.replace(usage.find("(TRUSTED)"), 9, trusted.str());
   return usage;
 }
 
@@ -157,6 +162,21 @@ std::vector<std::string> SplitComma(const std::string& s) {
     if (!item.empty()) out.push_back(item);
   }
   return out;
+}
+
+// A number in [0, 1].
+double ParseFraction(const std::string& flag, const std::string& value) {
+  size_t used = 0;
+  double v = -1;
+  try {
+    v = std::stod(value, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (value.empty() || used != value.size() || !(v >= 0 && v <= 1)) {
+    throw std::invalid_argument(flag + " must be a number in [0, 1], got '" + value + "'");
+  }
+  return v;
 }
 
 int64_t ParseInteger(const std::string& flag, const std::string& value, int64_t min, int64_t max) {
@@ -244,6 +264,8 @@ Options ParseArgs(int argc, char** argv) {
       o.refinement.sweep_hypotheses = ParseInteger(flag, value, 0, 1024);
     } else if (flag == "--refine_unseen_slope_radius") {
       o.refinement.unseen_slope_radius = ParseInteger(flag, value, 0, 64);
+    } else if (flag == "--refine_trusted_plane_ncc") {
+      o.refinement.trusted_plane_min_ncc = ParseFraction(flag, value);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

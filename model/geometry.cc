@@ -17,6 +17,8 @@
 
 #include "model/geometry.h"
 
+#include <ATen/Parallel.h>
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -268,16 +270,63 @@ torch::Tensor DistanceInsideSources(const EpipolarPair& pair, const torch::Tenso
   if (!pair.a.defined() || pair.a.size(0) != b * sources || pair.a.size(2) != height || pair.a.size(3) != width) {
     throw std::invalid_argument("DistanceInsideSources: the pair must hold B * sources pairs of w's size");
   }
-  // The projection written out (K_s (R K_r^-1 p / w + T) ~ a + w b): one
-  // pass instead of ProjectInverseDepth's checks, which took 60 ms for
-  // four sources at 640x480; a match that is not finite compares false and
-  // counts as outside, as its invalid matches would.
+  const double none = -std::numeric_limits<double>::infinity();
+  // The projection written out (K_s (R K_r^-1 p / w + T) ~ a + w b). On CPU
+  // float maps one loop over the pixels, every source at once: 3 ms for four
+  // sources at 640x480 where the operations below, a dozen full-size
+  // passes, took 28 ms (and ProjectInverseDepth's checks 60 ms). A match
+  // that is not finite compares false and counts as outside, as its invalid
+  // matches would.
+  const bool b_per_pixel = pair.b.defined() && pair.b.dim() == 4 && pair.b.size(2) == height &&
+                           pair.b.size(3) == width;
+  if (w.device().is_cpu() && w.scalar_type() == torch::kFloat32 && pair.a.scalar_type() == torch::kFloat32 &&
+      pair.b.scalar_type() == torch::kFloat32 && pair.b.dim() == 4 &&
+      (b_per_pixel || (pair.b.size(2) == 1 && pair.b.size(3) == 1))) {
+    const torch::Tensor wc = w.contiguous(), ac = pair.a.contiguous(), bc = pair.b.contiguous();
+    torch::Tensor best = torch::empty_like(wc);
+    const float* w_p = wc.data_ptr<float>();
+    const float* a_p = ac.data_ptr<float>();
+    const float* b_p = bc.data_ptr<float>();
+    float* out = best.data_ptr<float>();
+    const int64_t plane = height * width;
+    const float right = static_cast<float>(width - 1), bottom = static_cast<float>(height - 1);
+    const float outside = -std::numeric_limits<float>::infinity();
+    at::parallel_for(0, b * height, 16, [&](int64_t row_begin, int64_t row_end) {
+      for (int64_t row = row_begin; row < row_end; ++row) {
+        const int64_t item = row / height, first = (row % height) * width;
+        const float* w_row = w_p + item * plane + first;
+        float* out_row = out + item * plane + first;
+        for (int64_t x = 0; x < width; ++x) out_row[x] = outside;
+        for (int64_t s = 0; s < sources; ++s) {
+          const int64_t pair_index = item * sources + s;
+          const float* a0 = a_p + pair_index * 3 * plane + first;
+          const float* a1 = a0 + plane;
+          const float* a2 = a1 + plane;
+          const float* b0 = b_p + pair_index * 3 * (b_per_pixel ? plane : 1) + (b_per_pixel ? first : 0);
+          const int64_t b_stride = b_per_pixel ? plane : 1;
+          const int64_t b_step = b_per_pixel ? 1 : 0;
+          for (int64_t x = 0; x < width; ++x) {
+            const float wx = w_row[x];
+            const float* bx = b0 + x * b_step;
+            const float px = a0[x] + wx * bx[0], py = a1[x] + wx * bx[b_stride], pz = a2[x] + wx * bx[2 * b_stride];
+            const float u = px / pz, v = py / pz;
+            const float inside = std::min(std::min(u, right - u), std::min(v, bottom - v));
+            // NaN compares false: outside.
+            if (pz > 0 && std::isfinite(inside) && inside > out_row[x]) out_row[x] = inside;
+          }
+        }
+        for (int64_t x = 0; x < width; ++x) {
+          if (!(w_row[x] > 0)) out_row[x] = outside;
+        }
+      }
+    });
+    return best;
+  }
   const torch::Tensor p = torch::addcmul(pair.a, w.repeat_interleave(sources, 0), pair.b);
   const torch::Tensor z = p.narrow(1, 2, 1);
   const torch::Tensor x = p.narrow(1, 0, 1) / z, y = p.narrow(1, 1, 1) / z;
   const torch::Tensor inside = torch::minimum(torch::minimum(x, (width - 1) - x), torch::minimum(y, (height - 1) - y));
   const torch::Tensor in_front = (z > 0) & torch::isfinite(inside);
-  const double none = -std::numeric_limits<double>::infinity();
   const torch::Tensor distance = torch::where(in_front, inside, torch::full_like(inside, none));
   const torch::Tensor best = distance.view({b, sources, height, width}).amax(1, /*keepdim=*/true);
   return torch::where(w > 0, best, torch::full_like(best, none));

@@ -426,6 +426,36 @@ TEST(GeometryDistanceInsideSources, MatchesProjectionsByHand) {
   EXPECT_THROW(DistanceInsideSources(pair, w, 0, kH, kW), std::invalid_argument);
   EXPECT_THROW(DistanceInsideSources(pair, w, 3, kH, kW), std::invalid_argument);
   EXPECT_THROW(DistanceInsideSources(pair, w, 2, kH + 1, kW), std::invalid_argument);
+
+  // CPU float maps take a loop of their own: the same distances as the
+  // operations in double above, to float rounding, here for two batch items
+  // (four pairs: the second item's sources swapped) so that the loop's
+  // indexing of items and sources is checked too.
+  const torch::Tensor w2 = torch::cat({w, w.flip({3})});
+  const EpipolarPair pair2{torch::cat({pair.a, pair.a.flip({0})}), torch::cat({pair.b, pair.b.flip({0})})};
+  const torch::Tensor in_double = DistanceInsideSources(pair2, w2, 2, kH, kW);
+  const torch::Tensor in_float = DistanceInsideSources(
+      EpipolarPair{pair2.a.to(torch::kFloat32), pair2.b.to(torch::kFloat32)}, w2.to(torch::kFloat32), 2, kH, kW);
+  ASSERT_EQ(in_float.scalar_type(), torch::kFloat32);
+  ASSERT_EQ(in_float.sizes(), in_double.sizes());
+  int64_t finite = 0, outside = 0;
+  for (int64_t k = 0; k < 2; ++k) {
+    for (int64_t i = 0; i < kH; ++i) {
+      for (int64_t j = 0; j < kW; ++j) {
+        const double expected = in_double[k][0][i][j].item<double>();
+        const double got = in_float[k][0][i][j].item<double>();
+        if (std::isinf(expected)) {
+          EXPECT_TRUE(std::isinf(got) && got < 0) << k << "," << i << "," << j;
+          outside += 1;
+        } else {
+          EXPECT_NEAR(got, expected, 1e-4 * (1.0 + std::abs(expected))) << k << "," << i << "," << j;
+          finite += 1;
+        }
+      }
+    }
+  }
+  EXPECT_GT(finite, 1000);
+  EXPECT_GE(outside, 10);  // the pixels without depth, in both items
 }
 
 // (3) E-flow: base point and direction held fixed; E-flow -> pixel -> inverse

@@ -209,6 +209,7 @@ void PhotometricRefinementOptions::Check() const {
   if (sweep_hypotheses < 0 || sweep_hypotheses > 1024) fail("sweep_hypotheses must be in [0, 1024]");
   if (!(sweep_step_pixels > 0 && sweep_step_pixels <= 64)) fail("sweep_step_pixels must be in (0, 64]");
   if (unseen_slope_radius < 0 || unseen_slope_radius > 64) fail("unseen_slope_radius must be in [0, 64]");
+  if (!(trusted_plane_min_ncc >= 0 && trusted_plane_min_ncc <= 1)) fail("trusted_plane_min_ncc must be in [0, 1]");
 }
 
 bool ParseRefinementMode(const std::string& value, const std::string& option) {
@@ -313,6 +314,9 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     // Only the full-resolution map extends planes over unseen pixels: the
     // coarse pass's map is a candidate, taken where it correlates better.
     coarse_options.unseen_slope_radius = 0;
+    // Long-range planes at full resolution only: in the coarse pass too
+    // they gained 0.001 on realval's MVS pairs (docs/dense.md).
+    coarse_options.trusted_plane_min_ncc = 0.0;
     const PhotometricRefinement coarse_result = RefineDepthPhotometrically(
         coarse.images, coarse.intrinsics, extrinsics, coarse.depth, coarse.valid, coarse_options);
     // Inverse depth where the coarse pass changed it, 0 elsewhere (the
@@ -369,7 +373,8 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   const int64_t fine_distance =
       coarse_propagation ? std::max<int64_t>(1, options.propagation_distance / options.propagation_scale)
                          : options.propagation_distance;
-  if (fine_rounds > 0) {
+  const bool trusted_planes = options.trusted_plane_min_ncc > 0;
+  if (fine_rounds > 0 || trusted_planes) {
     // Propagation: every pixel tries the planes of pixels far away in four
     // directions, on the sources chosen above, and keeps the best-scoring
     // one; the jumps halve from fine_distance over fine_levels levels (the
@@ -394,6 +399,27 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
                                options.min_ncc, w_out, current, changed);
         }
       }
+    }
+    if (trusted_planes) {
+      // Long-range planes: every pixel tries the plane of the nearest
+      // refined pixel whose windows correlate almost perfectly
+      // (nearest_plane.h), however far, and keeps it where it correlates
+      // better (as propagation's candidates). Propagation's jumps reach a
+      // few dozen pixels, and its candidates come from whatever lies there,
+      // wrong blocks included; this candidate comes from a surface the
+      // images confirm, across a whole wrong block.
+      const torch::Tensor anchor = changed & (current >= options.trusted_plane_min_ncc);
+      const torch::Tensor candidate =
+          ExtendTrustedPlanes(w_out, anchor, kTrustedPlaneSlopeRadius, w_floor, w_ceiling, 0.0);
+      // A plane may bring a pixel nearer, but take it at most
+      // kTrustedPlaneMaxDepthRatio times further: the moves further than
+      // that were what raised the generated scenes' mean relative error
+      // (photometric_refinement.h).
+      const torch::Tensor candidate_score =
+          torch::where(candidate * kTrustedPlaneMaxDepthRatio >= w_out, surface_score(candidate),
+                       torch::full_like(current, -1.0));
+      TakeBetterCandidates(candidate, candidate_score, candidates_allowed, w_floor, w_ceiling, options.min_ncc,
+                           w_out, current, changed);
     }
     best_out = torch::where(changed, current, best_out);
     output_score = current;

@@ -381,6 +381,13 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "--refinement ncc: where no source sees a pixel at its refined depth (its match outside "
        "every source image), extend the plane of the nearest pixel a source sees, its slopes "
        "fitted over (2R+1)^2 such pixels; 0 = off (the network's depth stays there).")
+      ("refine_trusted_plane_ncc",
+       po::value<double>(&o.photometric.estimator.refinement_options.trusted_plane_min_ncc)
+           ->default_value(o.photometric.estimator.refinement_options.trusted_plane_min_ncc,
+                           FormatDefault(o.photometric.estimator.refinement_options.trusted_plane_min_ncc)),
+       "--refinement ncc: after propagation, every pixel also tries the plane of the nearest "
+       "refined pixel whose windows correlate at least this well (NCC), however far, and keeps it "
+       "where it correlates better: repairs wrong blocks wider than propagation's jumps. 0 = off.")
       ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
            ->default_value(o.photometric.estimator.confidence),
        "The confidence maps: model (the probability that a pixel's depth is within 2 %, "

@@ -79,6 +79,9 @@ options (default):
   --eval_refine_full_resolution_rounds K
                               evaluation only, with ncc and scale 2 or 4: propagation rounds at full
                               resolution after the search (--refine_full_resolution_rounds)
+  --eval_refine_full_resolution_levels K
+                              evaluation only, with ncc: jumps per full-resolution round
+                              (--refine_full_resolution_levels)
   --eval_refine_sweep_hypotheses K
                               evaluation only, with ncc: the sweep's most depths, 0 = off
                               (--refine_sweep_hypotheses)
@@ -94,6 +97,9 @@ options (default):
   --eval_refine_unseen_slope_radius R
                               evaluation only, with ncc: planes extended over pixels no source sees,
                               0 = off (--refine_unseen_slope_radius)
+  --eval_refine_trusted_plane_ncc C
+                              evaluation only, with ncc: long-range planes from pixels with NCC >= C,
+                              0 = off (--refine_trusted_plane_ncc)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -316,6 +322,9 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--eval_refine_full_resolution_rounds") {
       o.eval_refinement_options.full_resolution_rounds = ParseInt(flag, value);
     }
+    else if (flag == "--eval_refine_full_resolution_levels") {
+      o.eval_refinement_options.full_resolution_levels = ParseInt(flag, value);
+    }
     else if (flag == "--eval_refine_sweep_hypotheses") {
       o.eval_refinement_options.sweep_hypotheses = ParseInt(flag, value);
     }
@@ -330,6 +339,9 @@ CommandLine Parse(int argc, char** argv) {
     }
     else if (flag == "--eval_refine_unseen_slope_radius") {
       o.eval_refinement_options.unseen_slope_radius = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_refine_trusted_plane_ncc") {
+      o.eval_refinement_options.trusted_plane_min_ncc = ParseDouble(flag, value);
     }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
