@@ -270,7 +270,6 @@ torch::Tensor DistanceInsideSources(const EpipolarPair& pair, const torch::Tenso
   if (!pair.a.defined() || pair.a.size(0) != b * sources || pair.a.size(2) != height || pair.a.size(3) != width) {
     throw std::invalid_argument("DistanceInsideSources: the pair must hold B * sources pairs of w's size");
   }
-  const double none = -std::numeric_limits<double>::infinity();
   // The projection written out (K_s (R K_r^-1 p / w + T) ~ a + w b). On CPU
   // float maps with one b per pair (as MakeEpipolarPair gives) one loop over
   // the pixels, every source at once: 1.5 ms for four sources at 640x480
@@ -317,6 +316,7 @@ torch::Tensor DistanceInsideSources(const EpipolarPair& pair, const torch::Tenso
     });
     return best;
   }
+  const double none = -std::numeric_limits<double>::infinity();
   const torch::Tensor p = torch::addcmul(pair.a, w.repeat_interleave(sources, 0), pair.b);
   const torch::Tensor z = p.narrow(1, 2, 1);
   const torch::Tensor x = p.narrow(1, 0, 1) / z, y = p.narrow(1, 1, 1) / z;

@@ -415,11 +415,9 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
       // kTrustedPlaneMaxDepthRatio times further: the moves further than
       // that were what raised the generated scenes' mean relative error
       // (photometric_refinement.h).
-      const torch::Tensor candidate_score =
-          torch::where(candidate * kTrustedPlaneMaxDepthRatio >= w_out, surface_score(candidate),
-                       torch::full_like(current, -1.0));
-      TakeBetterCandidates(candidate, candidate_score, candidates_allowed, w_floor, w_ceiling, options.min_ncc,
-                           w_out, current, changed);
+      const torch::Tensor allowed = candidates_allowed & (candidate * kTrustedPlaneMaxDepthRatio >= w_out);
+      TakeBetterCandidates(candidate, surface_score(candidate), allowed, w_floor, w_ceiling, options.min_ncc, w_out,
+                           current, changed);
     }
     best_out = torch::where(changed, current, best_out);
     output_score = current;

