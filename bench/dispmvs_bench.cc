@@ -131,7 +131,10 @@ constexpr const char* kUsage =
     "  --refine_unseen_slope_radius R  with ncc: planes extended over pixels no source\n"
     "                           sees, 0 = off (dispmvs_colmap --refine_unseen_slope_radius) (UNSEEN)\n"
     "  --refine_trusted_plane_ncc C  with ncc: long-range planes from pixels with NCC >= C,\n"
-    "                           0 = off (dispmvs_colmap --refine_trusted_plane_ncc) (TRUSTED)\n";
+    "                           0 = off (dispmvs_colmap --refine_trusted_plane_ncc) (TRUSTED)\n"
+    "  --refine_trusted_plane_axis_anchors K  with ncc: long-range planes also from the nearest\n"
+    "                           anchors along the row (2), row and column (4), 0 = the nearest\n"
+    "                           alone (dispmvs_colmap --refine_trusted_plane_axis_anchors) (AXES)\n";
 
 // kUsage with the refinement's defaults (dispmvs_colmap's) filled in.
 std::string Usage() {
@@ -148,6 +151,7 @@ std::string Usage() {
   fill("(FULLLEVELS)", defaults.full_resolution_levels);
   fill("(SWEEP)", defaults.sweep_hypotheses);
   fill("(UNSEEN)", defaults.unseen_slope_radius);
+  fill("(AXES)", defaults.trusted_plane_axis_anchors);
   std::ostringstream trusted;
   trusted << "(" << defaults.trusted_plane_min_ncc << ")";
   usage.replace(usage.find("(TRUSTED)"), 9, trusted.str());
@@ -266,6 +270,8 @@ Options ParseArgs(int argc, char** argv) {
       o.refinement.unseen_slope_radius = ParseInteger(flag, value, 0, 64);
     } else if (flag == "--refine_trusted_plane_ncc") {
       o.refinement.trusted_plane_min_ncc = ParseFraction(flag, value);
+    } else if (flag == "--refine_trusted_plane_axis_anchors") {
+      o.refinement.trusted_plane_axis_anchors = ParseInteger(flag, value, 0, 4);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

@@ -44,6 +44,36 @@ TEST(NearestPlaneTest, NearestAnchorIsAtTheSmallestChessboardDistance) {
   }
 }
 
+TEST(NearestPlaneTest, NearestAnchorsAlongAxesAreTheNearestOnEachSide) {
+  torch::manual_seed(7);
+  torch::Tensor anchor = torch::rand({2, 1, 13, 19}) < 0.08;
+  anchor[1].fill_(false);  // an image without anchors
+  const auto along = NearestAnchorsAlongAxes(anchor);
+  for (const auto& t : along) {
+    ASSERT_EQ(t.scalar_type(), torch::kLong);
+    ASSERT_EQ(t.sizes(), anchor.sizes());
+    EXPECT_TRUE((t[1] == -1).all().item<bool>());
+  }
+  ASSERT_GT(anchor[0].sum().item<int64_t>(), 5);
+  const auto a = anchor.accessor<bool, 4>();
+  for (int64_t i = 0; i < 13; ++i) {
+    for (int64_t j = 0; j < 19; ++j) {
+      // Walk from the pixel to each side until an anchor: the expected index.
+      const int64_t steps[4][2] = {{0, -1}, {0, 1}, {-1, 0}, {1, 0}};
+      for (int side = 0; side < 4; ++side) {
+        int64_t want = -1;
+        for (int64_t y = i, x = j; y >= 0 && y < 13 && x >= 0 && x < 19; y += steps[side][0], x += steps[side][1]) {
+          if (a[0][0][y][x]) {
+            want = y * 19 + x;
+            break;
+          }
+        }
+        EXPECT_EQ(along[side][0][0][i][j].item<int64_t>(), want) << "side " << side << " at " << i << "," << j;
+      }
+    }
+  }
+}
+
 TEST(NearestPlaneTest, ExtendNearestPlaneIsExactOnAPlane) {
   // w = 0.3 + 0.004 x - 0.002 y, the slopes given exactly, anchors in one
   // block: the extension reproduces the plane everywhere.
@@ -60,6 +90,28 @@ TEST(NearestPlaneTest, ExtendNearestPlaneIsExactOnAPlane) {
   const torch::Tensor none = ExtendNearestPlane(w, torch::zeros_like(w), torch::zeros_like(w),
                                                 NearestAnchor(torch::zeros_like(anchor)));
   EXPECT_EQ(none.abs().max().item<float>(), 0.0f);
+}
+
+TEST(NearestPlaneTest, ExtendNearestPlaneLoopIsTheOperations) {
+  // Random planes at random anchors over two batch items, one without
+  // anchors: the CPU loop and the operations give the same maps.
+  torch::manual_seed(3);
+  const torch::Tensor anchor = torch::rand({2, 1, kH, kW}) < 0.05;
+  anchor[1].fill_(false);
+  const torch::Tensor w = 0.2 + torch::rand({2, 1, kH, kW});
+  const torch::Tensor gx = 0.01 * torch::randn({2, 1, kH, kW});
+  const torch::Tensor gy = 0.01 * torch::randn({2, 1, kH, kW});
+  const torch::Tensor nearest = NearestAnchor(anchor);
+  const torch::Tensor loop = ExtendNearestPlane(w, gx, gy, nearest);
+  const torch::Tensor ops = ExtendNearestPlaneByOps(w, gx, gy, nearest);
+  EXPECT_LT((loop - ops).abs().max().item<float>(), 1e-6f);
+  EXPECT_EQ(loop[1].abs().max().item<float>(), 0.0f);
+  // Within bounds: clamped, and 0 where the plane is not positive.
+  const torch::Tensor low = torch::full({2, 1, 1, 1}, 0.5f), high = torch::full({2, 1, 1, 1}, 0.9f);
+  const torch::Tensor within = ExtendNearestPlaneWithin(w, gx, gy, nearest, low, high);
+  const torch::Tensor want = torch::where((nearest >= 0) & (loop > 0), torch::clamp(loop, 0.5, 0.9),
+                                          torch::zeros_like(loop));
+  EXPECT_TRUE(torch::equal(within, want));
 }
 
 TEST(NearestPlaneTest, ExtendTrustedPlanesStopsAtTheBoundsAndBehindTheCamera) {
@@ -81,6 +133,7 @@ TEST(NearestPlaneTest, ExtendTrustedPlanesStopsAtTheBoundsAndBehindTheCamera) {
 TEST(NearestPlaneTest, RejectsBadInput) {
   EXPECT_THROW(NearestAnchor(torch::ones({1, 1, 4, 4})), std::invalid_argument);
   EXPECT_THROW(NearestAnchor(torch::ones({1, 4, 4}, torch::kBool)), std::invalid_argument);
+  EXPECT_THROW(NearestAnchorsAlongAxes(torch::ones({1, 1, 4, 4})), std::invalid_argument);
   const torch::Tensor f = torch::zeros({1, 1, 4, 4});
   const torch::Tensor index = torch::zeros({1, 1, 4, 4}, torch::kLong);
   EXPECT_THROW(ExtendNearestPlane(f, f, f, index.to(torch::kInt)), std::invalid_argument);

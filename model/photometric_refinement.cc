@@ -210,6 +210,9 @@ void PhotometricRefinementOptions::Check() const {
   if (!(sweep_step_pixels > 0 && sweep_step_pixels <= 64)) fail("sweep_step_pixels must be in (0, 64]");
   if (unseen_slope_radius < 0 || unseen_slope_radius > 64) fail("unseen_slope_radius must be in [0, 64]");
   if (!(trusted_plane_min_ncc >= 0 && trusted_plane_min_ncc <= 1)) fail("trusted_plane_min_ncc must be in [0, 1]");
+  if (trusted_plane_axis_anchors != 0 && trusted_plane_axis_anchors != 2 && trusted_plane_axis_anchors != 4) {
+    fail("trusted_plane_axis_anchors must be 0, 2 or 4");
+  }
 }
 
 bool ParseRefinementMode(const std::string& value, const std::string& option) {
@@ -401,23 +404,38 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
       }
     }
     if (trusted_planes) {
-      // Long-range planes: every pixel tries the plane of the nearest
-      // refined pixel whose windows correlate almost perfectly
-      // (nearest_plane.h), however far, and keeps it where it correlates
+      // Long-range planes: every pixel tries the planes of the nearest
+      // refined pixels whose windows correlate almost perfectly
+      // (nearest_plane.h), however far, and keeps one where it correlates
       // better (as propagation's candidates). Propagation's jumps reach a
       // few dozen pixels, and its candidates come from whatever lies there,
-      // wrong blocks included; this candidate comes from a surface the
-      // images confirm, across a whole wrong block.
+      // wrong blocks included; these come from surfaces the images confirm,
+      // across a whole wrong block: the nearest anchor of all, and with
+      // trusted_plane_axis_anchors the nearest along the pixel's row and
+      // column, on the block's other sides.
       const torch::Tensor anchor = changed & (current >= options.trusted_plane_min_ncc);
-      const torch::Tensor candidate =
-          ExtendTrustedPlanes(w_out, anchor, kTrustedPlaneSlopeRadius, w_floor, w_ceiling, 0.0);
-      // A plane may bring a pixel nearer, but take it at most
-      // kTrustedPlaneMaxDepthRatio times further: the moves further than
-      // that were what raised the generated scenes' mean relative error
-      // (photometric_refinement.h).
-      const torch::Tensor allowed = candidates_allowed & (candidate * kTrustedPlaneMaxDepthRatio >= w_out);
-      TakeBetterCandidates(candidate, surface_score(candidate), allowed, w_floor, w_ceiling, options.min_ncc, w_out,
-                           current, changed);
+      // Each anchor lends the plane fitted through the anchors around it,
+      // its value there included, not its own depth: anchors along a wrong
+      // block's border correlate well but sit a little off their surface,
+      // and a plane extended far magnifies that (docs/dense.md).
+      const LeastSquaresPlane fit = LeastSquaresPlanes(w_out, anchor, kTrustedPlaneSlopeRadius);
+      const torch::Tensor anchor_w = torch::where(fit.value > 0, fit.value, w_out);
+      std::vector<torch::Tensor> nearest = {NearestAnchor(anchor)};
+      if (options.trusted_plane_axis_anchors > 0) {
+        const auto along_axes = NearestAnchorsAlongAxes(anchor);
+        nearest.insert(nearest.end(), along_axes.begin(),
+                       along_axes.begin() + options.trusted_plane_axis_anchors);
+      }
+      for (const torch::Tensor& from : nearest) {
+        const torch::Tensor candidate = ExtendNearestPlaneWithin(anchor_w, fit.gx, fit.gy, from, w_floor, w_ceiling);
+        // A plane may bring a pixel nearer, but take it at most
+        // kTrustedPlaneMaxDepthRatio times further: the moves further than
+        // that were what raised the generated scenes' mean relative error
+        // (photometric_refinement.h).
+        const torch::Tensor allowed = candidates_allowed & (candidate * kTrustedPlaneMaxDepthRatio >= w_out);
+        TakeBetterCandidates(candidate, surface_score(candidate), allowed, w_floor, w_ceiling, options.min_ncc,
+                             w_out, current, changed);
+      }
     }
     best_out = torch::where(changed, current, best_out);
     output_score = current;

@@ -58,7 +58,7 @@
 // full-resolution search needs fewer steps (2 by default) after them. Then
 // options.full_resolution_rounds rounds (1 by default) propagate at full
 // resolution, with jumps of propagation_distance / scale pixels and
-// full_resolution_levels levels (16, 8): the coarse rounds find the
+// full_resolution_levels levels (16 by default): the coarse rounds find the
 // surface, this round gives it planes fitted at full resolution, which the
 // search's parabola between whole steps does not reach. Too small an image
 // for the coarse window (fewer than 2r + 2 coarse pixels a side)
@@ -75,14 +75,19 @@
 //
 // Long-range planes (options.trusted_plane_min_ncc > 0; 0.9 by default,
 // nearest_plane.h): after the full-resolution propagation, every pixel tries
-// the plane of the nearest refined pixel that correlates at least that well
-// (its slopes fitted over the (2 kTrustedPlaneSlopeRadius + 1)^2 such pixels
-// around it), kept as propagation's candidates are (where it scores better,
-// on a textured window, within the network's inverse depths) and where it
-// takes the pixel at most kTrustedPlaneMaxDepthRatio times further. Propagation's
+// the planes of the nearest refined pixels ("anchors") that correlate at
+// least that well: the nearest of all and, with
+// options.trusted_plane_axis_anchors (4 by default), the nearest on its row
+// to either side and on its column above and below. Each is the
+// least-squares plane through the anchors of the (2
+// kTrustedPlaneSlopeRadius + 1)^2 window around the anchor (its value
+// there, not the anchor's own depth, and its slopes), kept as
+// propagation's candidates are (where it scores better, on a textured
+// window, within the network's inverse depths) and where it takes the
+// pixel at most kTrustedPlaneMaxDepthRatio times further. Propagation's
 // candidates come from a few dozen pixels away, from whatever depth lies
-// there; this one from the nearest surface the images confirm, across wrong
-// blocks of any size.
+// there; these from the nearest surfaces the images confirm, on every side
+// of wrong blocks of any size.
 //
 // Pixels no source sees (options.unseen_slope_radius > 0; 16 by default,
 // nearest_plane.h): last, at full resolution, where the refined depth's
@@ -142,8 +147,8 @@ inline constexpr double kUnseenAnchorMargin = 8.0;
 // depths far from any surface: realval's MVS pairs' mean relative error
 // rose from 0.35 to 0.48 for 0.004 more pixels within 2 %.
 inline constexpr double kUnseenMaxChange = 0.3;
-// The slopes of a long-range plane (options.trusted_plane_min_ncc) are
-// fitted over the (2 r + 1)^2 trusted pixels around its anchor, r this: as
+// A long-range plane (options.trusted_plane_min_ncc) is fitted over the
+// (2 r + 1)^2 trusted pixels around its anchor, r this: as
 // wide as the unseen pixels' planes' default, so that a plane is fitted
 // over more than the texture of one window.
 inline constexpr int64_t kTrustedPlaneSlopeRadius = 16;

@@ -46,15 +46,18 @@ struct PhotometricRefinementOptions {
   int64_t propagation_scale = 2;
   // With propagation_scale 2 or 4: rounds of propagation at full resolution
   // after the full-resolution search, with full_resolution_levels jumps from
-  // propagation_distance / propagation_scale pixels (16 and 8 by default)
-  // and slopes over (2 propagation_slope_radius + 1)^2 pixels. The coarse
-  // rounds find the surface; this round gives it planes fitted at full
-  // resolution: realval's MVS pairs within 2 % 0.554 against 0.537 without
-  // it, in 1.30-1.36x the network's time in fp32 and 1.38x in bf16 (three
-  // levels: 0.556, but bf16 up to 1.50x; docs/dense.md, "A full-resolution
-  // round after the coarse ones").
+  // propagation_distance / propagation_scale pixels (16 by default; 16 and
+  // 8 with two levels) and slopes over (2 propagation_slope_radius + 1)^2
+  // pixels. The coarse rounds find the surface; this round gives it planes
+  // fitted at full resolution: realval's MVS pairs within 2 % 0.554 against
+  // 0.537 without it, in 1.30-1.36x the network's time in fp32 and 1.38x in
+  // bf16 (three levels: 0.556, but bf16 up to 1.50x; docs/dense.md, "A
+  // full-resolution round after the coarse ones"). One level since the
+  // long-range planes come from four sides (trusted_plane_axis_anchors),
+  // which pays for their four candidates: realval 0.603 against 0.604 with
+  // two levels, the 20 generated scenes 0.5155 against 0.5152.
   int64_t full_resolution_rounds = 1;
-  int64_t full_resolution_levels = 2;
+  int64_t full_resolution_levels = 1;
   // The sweep (depth_sweep.h), 0 hypotheses = off: constant inverse depths
   // over the network's range, about sweep_step_pixels apart in the one
   // source chosen at most pixels, at most sweep_hypotheses of them, on the
@@ -83,6 +86,15 @@ struct PhotometricRefinementOptions {
   // the 20 generated scenes 0.5093 against 0.5079 (docs/dense.md,
   // "Long-range planes").
   double trusted_plane_min_ncc = 0.9;
+  // With long-range planes, how many more anchors each pixel tries: 0, the
+  // nearest anchor alone; 2, also the nearest on its row to its left and to
+  // its right; 4, and on its column above and below. Where the nearest
+  // anchor lies on another surface, an anchor on another side of the wrong
+  // block lies on the right one. realval's MVS pairs within 2 % 0.604
+  // (4) against 0.601 (2) and 0.598 (0), with two full-resolution levels;
+  // each costs one more candidate (docs/dense.md, "Long-range planes from
+  // four sides").
+  int64_t trusted_plane_axis_anchors = 4;
 
   // Throws std::invalid_argument naming the field: radius in [1, 15], steps
   // in [1, 64], step_pixels in (0, 8], min_ncc in [-1, 1], min_texture >= 0,
@@ -90,7 +102,7 @@ struct PhotometricRefinementOptions {
   // slope radius in [1, 64], scale 1, 2 or 4, full-resolution rounds in
   // [0, 16] and levels in [1, 16], sweep hypotheses in [0, 1024] and step
   // pixels in (0, 64], unseen slope radius in [0, 64], trusted plane NCC in
-  // [0, 1].
+  // [0, 1], trusted plane axis anchors 0, 2 or 4.
   void Check() const;
 };
 

@@ -34,19 +34,25 @@ void CheckPlaneInputs(const torch::Tensor& w, const torch::Tensor& gx, const tor
 
 bool CpuFloat(const torch::Tensor& t) { return t.device().is_cpu() && t.scalar_type() == torch::kFloat32; }
 
+// The fit's loop takes a CPU float map and a CPU bool mask.
+bool CpuFloatMaps(const torch::Tensor& w, const torch::Tensor& usable) {
+  return CpuFloat(w) && usable.device().is_cpu() && usable.scalar_type() == torch::kBool;
+}
+
 // Rows per task of the slope fit: each band sums its first window afresh
 // (2r + 1 rows), so a fixed size keeps results independent of the thread
 // count, and 64 rows keep that start-up small at the radii used.
 constexpr int64_t kBandRows = 64;
 
-// The slopes of one band of rows of one map. Per column, the sums over the
+// The slopes (and, where value is not null, the plane at each pixel) of one
+// band of rows of one map. Per column, the sums over the
 // window's rows of m, m y, m y^2, m w and m w y (m: usable) move down with
 // the output row; along the row, nine running sums over the window's
 // columns give the moments. Coordinates are centred on the image, as in
 // the operations' version; in double, the centred moments keep their
 // digits (and the sums of m, x and y, integers, are exact).
 void FitBand(const float* w, const bool* usable, int64_t h, int64_t width, int64_t radius, int64_t row_begin,
-             int64_t row_end, float* gx, float* gy) {
+             int64_t row_end, float* gx, float* gy, float* value) {
   const double half_w = 0.5 * static_cast<double>(width - 1), half_h = 0.5 * static_cast<double>(h - 1);
   std::vector<double> m_sum(width, 0.0), my_sum(width, 0.0), myy_sum(width, 0.0), mw_sum(width, 0.0),
       mwy_sum(width, 0.0);
@@ -87,9 +93,11 @@ void FitBand(const float* w, const bool* usable, int64_t h, int64_t width, int64
     for (int64_t j = 0; j <= std::min(width - 1, radius); ++j) add_column(j, 1.0);
     float* gx_row = gx + i * width;
     float* gy_row = gy + i * width;
+    float* value_row = value != nullptr ? value + i * width : nullptr;
+    const double y_here = static_cast<double>(i) - half_h;
     for (int64_t j = 0; j < width; ++j) {
       const int64_t cols_inside = std::min(width - 1, j + radius) - std::max<int64_t>(0, j - radius) + 1;
-      float slope_x = 0.0f, slope_y = 0.0f;
+      float slope_x = 0.0f, slope_y = 0.0f, plane_here = 0.0f;
       // More than a quarter of the window inside the image usable (s0 is an
       // exact integer).
       if (4.0 * s0 > static_cast<double>(rows_inside * cols_inside)) {
@@ -98,12 +106,17 @@ void FitBand(const float* w, const bool* usable, int64_t h, int64_t width, int64
         const double cxw = swx / s0 - mx * mean_w, cyw = swy / s0 - my * mean_w;
         const double det = cxx * cyy - cxy * cxy;
         if (det > 1e-3) {
-          slope_x = static_cast<float>((cyy * cxw - cxy * cyw) / det);
-          slope_y = static_cast<float>((cxx * cyw - cxy * cxw) / det);
+          const double fit_x = (cyy * cxw - cxy * cyw) / det, fit_y = (cxx * cyw - cxy * cxw) / det;
+          slope_x = static_cast<float>(fit_x);
+          slope_y = static_cast<float>(fit_y);
+          // The plane through the centroid (mx, my, mean_w), at this pixel.
+          const double x_here = static_cast<double>(j) - half_w;
+          plane_here = static_cast<float>(mean_w + fit_x * (x_here - mx) + fit_y * (y_here - my));
         }
       }
       gx_row[j] = slope_x;
       gy_row[j] = slope_y;
+      if (value_row != nullptr) value_row[j] = plane_here;
       if (j + radius + 1 < width) add_column(j + radius + 1, 1.0);
       if (j - radius >= 0) add_column(j - radius, -1.0);
     }
@@ -114,24 +127,30 @@ void FitBand(const float* w, const bool* usable, int64_t h, int64_t width, int64
   }
 }
 
-std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopesCpu(const torch::Tensor& w_in,
-                                                              const torch::Tensor& usable_in, int64_t radius) {
+// The fit of every window on CPU float maps; the planes' values only when
+// asked for (propagation needs the slopes alone).
+LeastSquaresPlane LeastSquaresPlanesCpu(const torch::Tensor& w_in, const torch::Tensor& usable_in, int64_t radius,
+                                        bool with_value) {
   const torch::Tensor w = w_in.contiguous(), usable = usable_in.contiguous();
   const int64_t batch = w.size(0), h = w.size(2), width = w.size(3), hw = h * width;
   const int64_t bands = (h + kBandRows - 1) / kBandRows;
-  torch::Tensor gx = torch::empty_like(w), gy = torch::empty_like(w);
+  LeastSquaresPlane plane;
+  plane.gx = torch::empty_like(w);
+  plane.gy = torch::empty_like(w);
+  if (with_value) plane.value = torch::empty_like(w);
   const float* w_p = w.data_ptr<float>();
   const bool* m_p = usable.data_ptr<bool>();
-  float* gx_p = gx.data_ptr<float>();
-  float* gy_p = gy.data_ptr<float>();
+  float* gx_p = plane.gx.data_ptr<float>();
+  float* gy_p = plane.gy.data_ptr<float>();
+  float* value_p = with_value ? plane.value.data_ptr<float>() : nullptr;
   at::parallel_for(0, batch * bands, 1, [&](int64_t begin, int64_t end) {
     for (int64_t task = begin; task < end; ++task) {
       const int64_t item = task / bands, row_begin = (task % bands) * kBandRows;
       FitBand(w_p + item * hw, m_p + item * hw, h, width, radius, row_begin, std::min(row_begin + kBandRows, h),
-              gx_p + item * hw, gy_p + item * hw);
+              gx_p + item * hw, gy_p + item * hw, value_p != nullptr ? value_p + item * hw : nullptr);
     }
   });
-  return {gx, gy};
+  return plane;
 }
 
 // t shifted so that out(y, x) = t(y + dy, x + dx), zero where that is outside.
@@ -176,9 +195,8 @@ torch::Tensor PlaneFromNeighbourCpu(const torch::Tensor& w_in, const torch::Tens
   return out;
 }
 
-// LeastSquaresSlopesByOps on checked inputs.
-std::pair<torch::Tensor, torch::Tensor> SlopesByOps(const torch::Tensor& w, const torch::Tensor& usable,
-                                                    int64_t radius) {
+// LeastSquaresPlanesByOps on checked inputs.
+LeastSquaresPlane PlanesByOps(const torch::Tensor& w, const torch::Tensor& usable, int64_t radius) {
   const int64_t h = w.size(2), wd = w.size(3);
   const torch::Tensor m = usable.to(w.scalar_type());
   const torch::Tensor x =
@@ -196,8 +214,11 @@ std::pair<torch::Tensor, torch::Tensor> SlopesByOps(const torch::Tensor& w, cons
   const torch::Tensor det = cxx * cyy - cxy * cxy;
   const torch::Tensor ok = (c(0) > 0.25) & (det > 1e-3);
   const torch::Tensor safe = torch::where(ok, det, torch::ones_like(det));
-  return {torch::where(ok, (cyy * cxw - cxy * cyw) / safe, torch::zeros_like(w)),
-          torch::where(ok, (cxx * cyw - cxy * cxw) / safe, torch::zeros_like(w))};
+  LeastSquaresPlane plane;
+  plane.gx = torch::where(ok, (cyy * cxw - cxy * cyw) / safe, torch::zeros_like(w));
+  plane.gy = torch::where(ok, (cxx * cyw - cxy * cxw) / safe, torch::zeros_like(w));
+  plane.value = torch::where(ok, mean_w + plane.gx * (x - mx) + plane.gy * (y - my), torch::zeros_like(w));
+  return plane;
 }
 
 // PlaneFromNeighbourByOps on checked inputs.
@@ -214,16 +235,26 @@ torch::Tensor PlaneByOps(const torch::Tensor& w, const torch::Tensor& gx, const 
 std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopesByOps(const torch::Tensor& w,
                                                                 const torch::Tensor& usable, int64_t radius) {
   CheckSlopeInputs(w, usable, radius);
-  return SlopesByOps(w, usable, radius);
+  const LeastSquaresPlane plane = PlanesByOps(w, usable, radius);
+  return {plane.gx, plane.gy};
 }
 
 std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopes(const torch::Tensor& w, const torch::Tensor& usable,
                                                            int64_t radius) {
   CheckSlopeInputs(w, usable, radius);
-  if (CpuFloat(w) && usable.device().is_cpu() && usable.scalar_type() == torch::kBool) {
-    return LeastSquaresSlopesCpu(w, usable, radius);
-  }
-  return SlopesByOps(w, usable, radius);
+  const LeastSquaresPlane plane =
+      CpuFloatMaps(w, usable) ? LeastSquaresPlanesCpu(w, usable, radius, false) : PlanesByOps(w, usable, radius);
+  return {plane.gx, plane.gy};
+}
+
+LeastSquaresPlane LeastSquaresPlanesByOps(const torch::Tensor& w, const torch::Tensor& usable, int64_t radius) {
+  CheckSlopeInputs(w, usable, radius);
+  return PlanesByOps(w, usable, radius);
+}
+
+LeastSquaresPlane LeastSquaresPlanes(const torch::Tensor& w, const torch::Tensor& usable, int64_t radius) {
+  CheckSlopeInputs(w, usable, radius);
+  return CpuFloatMaps(w, usable) ? LeastSquaresPlanesCpu(w, usable, radius, true) : PlanesByOps(w, usable, radius);
 }
 
 torch::Tensor PlaneFromNeighbourByOps(const torch::Tensor& w, const torch::Tensor& gx, const torch::Tensor& gy,

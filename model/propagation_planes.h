@@ -41,6 +41,22 @@ std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopes(const torch::Tensor& 
 std::pair<torch::Tensor, torch::Tensor> LeastSquaresSlopesByOps(const torch::Tensor& w,
                                                                 const torch::Tensor& usable, int64_t radius);
 
+// A least-squares plane of every window: its inverse depth at the window's
+// own pixel and its slopes, each [B,1,H,W].
+struct LeastSquaresPlane {
+  torch::Tensor value, gx, gy;
+};
+
+// LeastSquaresSlopes' fit with the plane's value at each window's pixel
+// (the fit's intercept there), 0 where the fit declines (where the slopes
+// are 0 for that reason). A pixel's own inverse depth may lie off the plane
+// of its neighbours (noise, or the pixel is on another surface); the value
+// is what its neighbours say. Same inputs and errors as LeastSquaresSlopes.
+LeastSquaresPlane LeastSquaresPlanes(const torch::Tensor& w, const torch::Tensor& usable, int64_t radius);
+
+// The same by LibTorch operations on any device (float arithmetic).
+LeastSquaresPlane LeastSquaresPlanesByOps(const torch::Tensor& w, const torch::Tensor& usable, int64_t radius);
+
 // The plane of the pixel (dx, dy) away, extended to every pixel p:
 // w(p + o) - dx gx(p + o) - dy gy(p + o) with o = (dx, dy); 0 where p + o is
 // outside the image, has no inverse depth (w <= 0) or the plane is not

@@ -41,11 +41,16 @@ Map MakeMap(int64_t h, int64_t width, uint64_t seed = 5) {
 // Acceptance as documented: more than a quarter of the window's pixels
 // inside the image usable, and the determinant of the covariance of their
 // coordinates above 1e-3.
-std::pair<torch::Tensor, torch::Tensor> DirectSlopes(const torch::Tensor& w, const torch::Tensor& usable,
-                                                     int64_t radius) {
+struct DirectPlane {
+  torch::Tensor value, gx, gy;  // double
+};
+
+DirectPlane DirectPlanes(const torch::Tensor& w, const torch::Tensor& usable, int64_t radius) {
   const int64_t batch = w.size(0), h = w.size(2), width = w.size(3);
-  torch::Tensor gx = torch::zeros({batch, 1, h, width}, torch::kFloat64);
-  torch::Tensor gy = torch::zeros_like(gx);
+  torch::Tensor value = torch::zeros({batch, 1, h, width}, torch::kFloat64);
+  torch::Tensor gx = torch::zeros_like(value);
+  torch::Tensor gy = torch::zeros_like(value);
+  auto value_a = value.accessor<double, 4>();
   const auto w_a = w.accessor<float, 4>();
   const auto m_a = usable.accessor<bool, 4>();
   auto gx_a = gx.accessor<double, 4>();
@@ -83,12 +88,20 @@ std::pair<torch::Tensor, torch::Tensor> DirectSlopes(const torch::Tensor& w, con
         const auto det3 = [](double a, double b, double c, double d, double e, double f, double g, double hh,
                              double k) { return a * (e * k - f * hh) - b * (d * k - f * g) + c * (d * hh - e * g); };
         const double d = det3(n, su, sv, su, suu, suv, sv, suv, svv);
+        // c: the plane at (u, v) = (0, 0), the window's own pixel.
+        value_a[b][0][i][j] = det3(sw, su, sv, suw, suu, suv, svw, suv, svv) / d;
         gx_a[b][0][i][j] = det3(n, sw, sv, su, suw, suv, sv, svw, svv) / d;
         gy_a[b][0][i][j] = det3(n, su, sw, su, suu, suw, sv, suv, svw) / d;
       }
     }
   }
-  return {gx, gy};
+  return {value, gx, gy};
+}
+
+std::pair<torch::Tensor, torch::Tensor> DirectSlopes(const torch::Tensor& w, const torch::Tensor& usable,
+                                                     int64_t radius) {
+  const DirectPlane plane = DirectPlanes(w, usable, radius);
+  return {plane.gx, plane.gy};
 }
 
 TEST(LeastSquaresSlopes, MatchesADirectFitOfEveryWindow) {
@@ -114,6 +127,32 @@ TEST(LeastSquaresSlopes, MatchesADirectFitOfEveryWindow) {
     if (h > 4 * radius) {
       EXPECT_GT((want_x == 0).sum().item<int64_t>(), 0) << h << "x" << width;
     }
+  }
+}
+
+TEST(LeastSquaresPlanes, TheValueIsADirectFitsInterceptAtThePixel) {
+  for (const auto& [h, width, radius] : {std::tuple<int64_t, int64_t, int64_t>{37, 53, 3},
+                                         {70, 41, 8},
+                                         {5, 9, 4}}) {
+    const Map map = MakeMap(h, width, 11);
+    const LeastSquaresPlane plane = LeastSquaresPlanes(map.w, map.usable, radius);
+    const DirectPlane want = DirectPlanes(map.w, map.usable, radius);
+    // The same slopes as LeastSquaresSlopes, bit for bit.
+    const auto [gx, gy] = LeastSquaresSlopes(map.w, map.usable, radius);
+    EXPECT_TRUE(torch::equal(plane.gx, gx));
+    EXPECT_TRUE(torch::equal(plane.gy, gy));
+    // 0 where the fit declines; the intercept to float precision elsewhere
+    // (inverse depths of 0.3-1: a few float roundings of w).
+    const torch::Tensor fitted = want.gx != 0;
+    EXPECT_TRUE(torch::equal(plane.value == 0, ~fitted)) << h << "x" << width;
+    EXPECT_LT((plane.value.to(torch::kFloat64) - want.value).abs().max().item<double>(), 1e-6);
+    // The fit is not the pixel's own value: the map's ripples and noise
+    // leave residuals, and unusable pixels (w <= 0) get the neighbours'.
+    EXPECT_GT(((plane.value - map.w).abs() > 1e-4).logical_and(fitted).sum().item<int64_t>(), 0);
+    const LeastSquaresPlane ops = LeastSquaresPlanesByOps(map.w, map.usable, radius);
+    const torch::Tensor both = (plane.value != 0) & (ops.value != 0);
+    EXPECT_LT(torch::where(both, (plane.value - ops.value).abs(), torch::zeros_like(ops.value)).max().item<double>(),
+              1e-4);
   }
 }
 

@@ -388,6 +388,12 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "--refinement ncc: after propagation, every pixel also tries the plane of the nearest "
        "refined pixel whose windows correlate at least this well (NCC), however far, and keeps it "
        "where it correlates better: repairs wrong blocks wider than propagation's jumps. 0 = off.")
+      ("refine_trusted_plane_axis_anchors",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.trusted_plane_axis_anchors)
+           ->default_value(o.photometric.estimator.refinement_options.trusted_plane_axis_anchors),
+       "--refinement ncc, with long-range planes: also try the planes of the nearest such pixels "
+       "along the pixel's row (2) and its row and column (4), on a wrong block's other sides; "
+       "0 = the nearest alone.")
       ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
            ->default_value(o.photometric.estimator.confidence),
        "The confidence maps: model (the probability that a pixel's depth is within 2 %, "

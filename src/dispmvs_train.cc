@@ -100,6 +100,10 @@ options (default):
   --eval_refine_trusted_plane_ncc C
                               evaluation only, with ncc: long-range planes from pixels with NCC >= C,
                               0 = off (--refine_trusted_plane_ncc)
+  --eval_refine_trusted_plane_axis_anchors K
+                              evaluation only, with ncc: long-range planes also from the nearest
+                              anchors along the row (2), row and column (4); 0 = the nearest alone
+                              (--refine_trusted_plane_axis_anchors)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -342,6 +346,9 @@ CommandLine Parse(int argc, char** argv) {
     }
     else if (flag == "--eval_refine_trusted_plane_ncc") {
       o.eval_refinement_options.trusted_plane_min_ncc = ParseDouble(flag, value);
+    }
+    else if (flag == "--eval_refine_trusted_plane_axis_anchors") {
+      o.eval_refinement_options.trusted_plane_axis_anchors = ParseInt(flag, value);
     }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
