@@ -167,7 +167,8 @@ torch::Tensor ExtendNearestPlaneWithin(const torch::Tensor& w, const torch::Tens
                                        const torch::Tensor& high) {
   const torch::Tensor extended = ExtendNearestPlane(w, gx, gy, nearest);
   const torch::Tensor bounded = torch::minimum(torch::maximum(extended, low), high);
-  return torch::where((nearest >= 0) & (extended > 0), bounded, torch::zeros_like(extended));
+  // ExtendNearestPlane is 0 where nearest is -1: "positive" covers both.
+  return torch::where(extended > 0, bounded, torch::zeros_like(extended));
 }
 
 torch::Tensor ExtendTrustedPlanes(const torch::Tensor& w, const torch::Tensor& trusted, int64_t slope_radius,
