@@ -134,7 +134,11 @@ constexpr const char* kUsage =
     "                           0 = off (dispmvs_colmap --refine_trusted_plane_ncc) (TRUSTED)\n"
     "  --refine_trusted_plane_axis_anchors K  with ncc: long-range planes also from the nearest\n"
     "                           anchors along the row (2), row and column (4), 0 = the nearest\n"
-    "                           alone (dispmvs_colmap --refine_trusted_plane_axis_anchors) (AXES)\n";
+    "                           alone (dispmvs_colmap --refine_trusted_plane_axis_anchors) (AXES)\n"
+    "  --refine_local_plane_radius R  with ncc: local planes over (2R+1)^2 pixels, 0 = off\n"
+    "                           (dispmvs_colmap --refine_local_plane_radius) (LOCAL)\n"
+    "  --refine_local_plane_max_change C  with ncc: their largest relative change\n"
+    "                           (dispmvs_colmap --refine_local_plane_max_change) (LOCALCHANGE)\n";
 
 // kUsage with the refinement's defaults (dispmvs_colmap's) filled in.
 std::string Usage() {
@@ -152,9 +156,13 @@ std::string Usage() {
   fill("(SWEEP)", defaults.sweep_hypotheses);
   fill("(UNSEEN)", defaults.unseen_slope_radius);
   fill("(AXES)", defaults.trusted_plane_axis_anchors);
+  fill("(LOCAL)", defaults.local_plane_radius);
   std::ostringstream trusted;
   trusted << "(" << defaults.trusted_plane_min_ncc << ")";
   usage.replace(usage.find("(TRUSTED)"), 9, trusted.str());
+  std::ostringstream local_change;
+  local_change << "(" << defaults.local_plane_max_change << ")";
+  usage.replace(usage.find("(LOCALCHANGE)"), 13, local_change.str());
   return usage;
 }
 
@@ -272,6 +280,10 @@ Options ParseArgs(int argc, char** argv) {
       o.refinement.trusted_plane_min_ncc = ParseFraction(flag, value);
     } else if (flag == "--refine_trusted_plane_axis_anchors") {
       o.refinement.trusted_plane_axis_anchors = ParseInteger(flag, value, 0, 4);
+    } else if (flag == "--refine_local_plane_radius") {
+      o.refinement.local_plane_radius = ParseInteger(flag, value, 0, 16);
+    } else if (flag == "--refine_local_plane_max_change") {
+      o.refinement.local_plane_max_change = ParseFraction(flag, value);
     } else if (flag == "--reps") {
       o.reps = ParseInteger(flag, value, 1, 1000);
     } else {

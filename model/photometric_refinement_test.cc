@@ -113,6 +113,7 @@ PhotometricRefinementOptions SearchOnly() {
   options.sweep_hypotheses = 0;
   options.unseen_slope_radius = 0;
   options.trusted_plane_min_ncc = 0.0;
+  options.local_plane_radius = 0;
   return options;
 }
 
@@ -145,6 +146,33 @@ TEST(PhotometricRefinementTest, PullsADepthSeveralPixelsOffOntoTheTexturedPlane)
   EXPECT_GT(out.score.masked_select(out.refined).min().item<float>(), 0.2);
   // Where it did not refine, the depth is the input's, bit for bit.
   EXPECT_TRUE(torch::equal(out.depth.masked_select(~out.refined), start.masked_select(~out.refined)));
+}
+
+TEST(PhotometricRefinementTest, LocalPlanesAverageOutTheSearchsScatter) {
+  const PlaneScene scene = MakePlaneScene();
+  const torch::Tensor valid = torch::ones_like(scene.depth, torch::kBool);
+  const torch::Tensor start = scene.depth * 1.12;
+  PhotometricRefinementOptions with_planes = SearchOnly();
+  with_planes.local_plane_radius = 2;
+  const PhotometricRefinement search =
+      RefineDepthPhotometrically(scene.images, scene.intrinsics, scene.extrinsics, start, valid, SearchOnly());
+  const PhotometricRefinement planes =
+      RefineDepthPhotometrically(scene.images, scene.intrinsics, scene.extrinsics, start, valid, with_planes);
+  const torch::Tensor interior = Interior(6);
+  const torch::Tensor search_error = RelativeError(search.depth, scene.depth).masked_select(interior);
+  const torch::Tensor planes_error = RelativeError(planes.depth, scene.depth).masked_select(interior);
+  const auto within = [](const torch::Tensor& error, double bound) {
+    return (error < bound).to(torch::kFloat32).mean().item<float>();
+  };
+  // Measured: the search alone median 0.35 %, 0.674 within 0.5 %; with
+  // local planes (radius 2) median 0.19 %, 0.785 within 0.5 %: the
+  // parabola's bias between whole steps varies along the plane, and the
+  // plane through 25 pixels averages it.
+  EXPECT_LT(planes_error.median().item<float>(), search_error.median().item<float>());
+  EXPECT_GT(within(planes_error, 0.005), within(search_error, 0.005));
+  // Only a move within the bound: no pixel is further than 3 % from where
+  // the search left it.
+  EXPECT_LE(RelativeError(planes.depth.reciprocal(), search.depth.reciprocal()).max().item<float>(), 0.03 + 1e-5);
 }
 
 TEST(PhotometricRefinementTest, KeepsTheTrueDepth) {
@@ -430,6 +458,15 @@ TEST(PhotometricRefinementTest, ChecksOptionsAndShapes) {
   o = {};
   o.trusted_plane_axis_anchors = 3;
   rejects(o, "trusted_plane_axis_anchors");
+  o = {};
+  o.local_plane_radius = 17;
+  rejects(o, "local_plane_radius");
+  o = {};
+  o.local_plane_max_change = 0.0;
+  rejects(o, "local_plane_max_change");
+  o = {};
+  o.local_plane_max_change = 1.5;
+  rejects(o, "local_plane_max_change");
   o = {};
   o.full_resolution_rounds = -1;
   rejects(o, "full_resolution_rounds");

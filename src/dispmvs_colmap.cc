@@ -394,6 +394,19 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "--refinement ncc, with long-range planes: also try the planes of the nearest such pixels "
        "along the pixel's row (2) and its row and column (4), on a wrong block's other sides; "
        "0 = the nearest alone.")
+      ("refine_local_plane_radius",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.local_plane_radius)
+           ->default_value(o.photometric.estimator.refinement_options.local_plane_radius),
+       "--refinement ncc: last, every pixel takes the value of the least-squares plane through "
+       "the well-correlated pixels of the (2R+1)^2 window around it, where that lies near its own "
+       "depth (--refine_local_plane_max_change): averages out the per-pixel matches' scatter. "
+       "0 = off.")
+      ("refine_local_plane_max_change",
+       po::value<double>(&o.photometric.estimator.refinement_options.local_plane_max_change)
+           ->default_value(o.photometric.estimator.refinement_options.local_plane_max_change,
+                           FormatDefault(o.photometric.estimator.refinement_options.local_plane_max_change)),
+       "--refinement ncc, with local planes: the largest relative change of inverse depth they "
+       "make, in (0, 1]; keeps them off depth edges.")
       ("confidence", po::value<std::string>(&o.photometric.estimator.confidence)
            ->default_value(o.photometric.estimator.confidence),
        "The confidence maps: model (the probability that a pixel's depth is within 2 %, "

@@ -104,6 +104,12 @@ options (default):
                               evaluation only, with ncc: long-range planes also from the nearest
                               anchors along the row (2), row and column (4); 0 = the nearest alone
                               (--refine_trusted_plane_axis_anchors)
+  --eval_refine_local_plane_radius R
+                              evaluation only, with ncc: local planes over (2R+1)^2 pixels, 0 = off
+                              (--refine_local_plane_radius)
+  --eval_refine_local_plane_max_change C
+                              evaluation only, with ncc: their largest relative change
+                              (--refine_local_plane_max_change)
   --precision P               the GRU update's convolutions in fp32, bf16 or auto (bf16 on a CPU
                               with native bf16, as dispmvs_colmap's default). Training: bf16 steps
                               are ~1.3x faster there; weights, gradients and Adam stay fp32 and the
@@ -349,6 +355,12 @@ CommandLine Parse(int argc, char** argv) {
     }
     else if (flag == "--eval_refine_trusted_plane_axis_anchors") {
       o.eval_refinement_options.trusted_plane_axis_anchors = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_refine_local_plane_radius") {
+      o.eval_refinement_options.local_plane_radius = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_refine_local_plane_max_change") {
+      o.eval_refinement_options.local_plane_max_change = ParseDouble(flag, value);
     }
     else if (flag == "--train_coarse_iterations") o.train_coarse_iterations = ParseInt(flag, value);
     else if (flag == "--difficulty_start") o.difficulty_start = ParseDouble(flag, value);
