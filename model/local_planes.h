@@ -5,14 +5,14 @@
 // pixels around it, where that value lies near its own.
 //
 // Why: the search takes each pixel's own maximum of a 7x7 window's NCC, and
-// propagation keeps a candidate wherever it scores higher; both maxima
-// scatter by a percent or two around the surface (image noise, the window's
-// changing content), most on weakly textured and distant surfaces. The
-// plane through the neighbours' depths averages that scatter out, and on a
-// plane in the scene inverse depth is affine in the pixel coordinates, so
-// the fit is exact there. The bound on the change keeps the fit from
-// pulling a pixel across a depth edge: there the plane through the window
-// mixes two surfaces and lies far from both.
+// propagation keeps a candidate wherever it scores higher; nothing makes
+// neighbours on one surface agree, and each maximum carries its own error
+// (on a textured plane the search alone leaves a median error of 0.35 %
+// that varies along the plane). On a plane in the scene inverse depth is
+// affine in the pixel coordinates, so the plane through the neighbours'
+// depths averages those errors out (0.19 %). The bound on the change keeps
+// the fit from pulling a pixel across a depth edge: there the plane through
+// the window mixes two surfaces and lies far from both.
 
 #include <cstdint>
 

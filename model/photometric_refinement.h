@@ -95,9 +95,9 @@
 // through the pixels of the (2 radius + 1)^2 window around it whose NCC at
 // their depth is at least kLocalPlaneMinNcc, where that value lies within
 // options.local_plane_max_change (3 % by default) of its own inverse depth.
-// The search's and propagation's per-pixel NCC maxima scatter around the
-// surface by a percent or two; the plane through the neighbours does not,
-// and the bound keeps it off depth edges.
+// The search's and propagation's per-pixel NCC maxima each carry their own
+// error; the plane through the neighbours averages them out, and the bound
+// keeps it off depth edges.
 //
 // Pixels no source sees (options.unseen_slope_radius > 0; 16 by default,
 // nearest_plane.h): last, at full resolution, where the refined depth's

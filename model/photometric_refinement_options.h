@@ -100,9 +100,9 @@ struct PhotometricRefinementOptions {
   // through the pixels of the (2 local_plane_radius + 1)^2 window around it
   // that correlate at NCC >= kLocalPlaneMinNcc, where that value lies within
   // local_plane_max_change (relative) of the pixel's own. The search's
-  // per-pixel maxima of a 7x7 window's NCC scatter by a percent or two
-  // around the surface; the plane through the neighbours' does not, and the
-  // bound keeps it from crossing a depth edge. realval's MVS pairs within
+  // per-pixel maxima of a 7x7 window's NCC each carry their own error; the
+  // plane through the neighbours averages them out, and the bound keeps it
+  // from crossing a depth edge. realval's MVS pairs within
   // 2 % 0.612 against 0.603, their geometric maps 0.490 against 0.440
   // (radius 2, 0.03; docs/dense.md, "Local planes").
   int64_t local_plane_radius = 2;
