@@ -25,8 +25,9 @@ LocalPlaneSnap SnapToLocalPlanes(const torch::Tensor& w, const torch::Tensor& su
     result.w = torch::where(result.snapped, fit.value, w);
     return result;
   }
-  // On the CPU one pass instead of eight full-size operations (they cost
-  // three times the fit at 640x480).
+  // On the CPU one pass instead of eight full-size operations: at 640x480
+  // (two threads, best of 20 beside other work) the operations took 8.6 ms
+  // on top of the fit's 3.4; the loop takes under 1 ms with the machine idle.
   const torch::Tensor w_in = w.contiguous(), value = fit.value.contiguous();
   const torch::Tensor applied = apply.to(torch::kBool).contiguous();
   result.w = torch::empty_like(w_in);

@@ -59,8 +59,8 @@ TEST(LocalPlanes, AveragesTheScatterOutAndKeepsTheEdge) {
 TEST(LocalPlanes, OnlyWhereAppliedAndFromTheSupport) {
   const int64_t h = 30, width = 30;
   const Scene scene = MakeScene(h, width);
-  // The support excludes a block set to a far wrong value, as pixels that
-  // correlate badly would be; the fit around it ignores them.
+  // The support excludes a block set 2 % off, as pixels that correlate
+  // badly would be; the fit around it ignores them.
   torch::Tensor w = scene.noisy.clone();
   torch::Tensor support = torch::ones({1, 1, h, width}, torch::kBool);
   w.narrow(2, 10, 4).narrow(3, 20, 4).mul_(1.02f);
