@@ -135,6 +135,8 @@ constexpr const char* kUsage =
     "  --refine_trusted_plane_axis_anchors K  with ncc: long-range planes also from the nearest\n"
     "                           anchors along the row (2), row and column (4), 0 = the nearest\n"
     "                           alone (dispmvs_colmap --refine_trusted_plane_axis_anchors) (AXES)\n"
+    "  --refine_window_shift S  with ncc: the best of windows shifted by S pixels, 0 = the\n"
+    "                           centred window alone (dispmvs_colmap --refine_window_shift) (SHIFT)\n"
     "  --refine_local_plane_radius R  with ncc: local planes over (2R+1)^2 pixels, 0 = off\n"
     "                           (dispmvs_colmap --refine_local_plane_radius) (LOCAL)\n"
     "  --refine_local_plane_max_change C  with ncc: their largest relative change\n"
@@ -156,6 +158,7 @@ std::string Usage() {
   fill("(SWEEP)", defaults.sweep_hypotheses);
   fill("(UNSEEN)", defaults.unseen_slope_radius);
   fill("(AXES)", defaults.trusted_plane_axis_anchors);
+  fill("(SHIFT)", defaults.window_shift);
   fill("(LOCAL)", defaults.local_plane_radius);
   std::ostringstream trusted;
   trusted << "(" << defaults.trusted_plane_min_ncc << ")";
@@ -280,6 +283,8 @@ Options ParseArgs(int argc, char** argv) {
       o.refinement.trusted_plane_min_ncc = ParseFraction(flag, value);
     } else if (flag == "--refine_trusted_plane_axis_anchors") {
       o.refinement.trusted_plane_axis_anchors = ParseInteger(flag, value, 0, 4);
+    } else if (flag == "--refine_window_shift") {
+      o.refinement.window_shift = ParseInteger(flag, value, 0, 15);
     } else if (flag == "--refine_local_plane_radius") {
       o.refinement.local_plane_radius = ParseInteger(flag, value, 0, 16);
     } else if (flag == "--refine_local_plane_max_change") {

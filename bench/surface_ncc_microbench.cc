@@ -2,7 +2,9 @@
 // pass (model/surface_ncc_rows.h): one source plane's NCC along a surface,
 // in the bands of 64 rows the refinement runs, by the portable build and by
 // the AVX2 build, one thread. Every hypothesis of the refinement's search
-// and every propagated candidate is one such pass per source.
+// and every propagated candidate is one such pass per source, and then one
+// BestOfShiftedWindows over its score (model/shifted_windows.h), timed here
+// too at the threads LibTorch uses.
 //
 //   surface_ncc_microbench [--benchmark_repetitions=5]
 //
@@ -19,7 +21,9 @@
 #include <vector>
 
 #include <benchmark/benchmark.h>
+#include <torch/torch.h>
 
+#include "model/shifted_windows.h"
 #include "model/surface_ncc_rows.h"
 
 namespace {
@@ -98,6 +102,16 @@ void BM_SurfaceNccPlane(benchmark::State& state) {
 
 BENCHMARK_TEMPLATE(BM_SurfaceNccPlane, false)->Args({640, 480})->Args({320, 240})->Unit(benchmark::kMillisecond);
 BENCHMARK_TEMPLATE(BM_SurfaceNccPlane, true)->Args({640, 480})->Args({320, 240})->Unit(benchmark::kMillisecond);
+
+// The refinement's shifted windows (window_shift 2) over one score map.
+void BM_BestOfShiftedWindows(benchmark::State& state) {
+  torch::manual_seed(1);
+  const torch::Tensor score = torch::rand({1, 1, state.range(1), state.range(0)});
+  for (auto _ : state) benchmark::DoNotOptimize(dispmvs::model::BestOfShiftedWindows(score, 2));
+  state.SetItemsProcessed(state.iterations() * state.range(0) * state.range(1));
+}
+
+BENCHMARK(BM_BestOfShiftedWindows)->Args({640, 480})->Args({320, 240})->Unit(benchmark::kMillisecond);
 
 }  // namespace
 

@@ -27,6 +27,11 @@
 //    the worse half is left out); a chosen source whose match comes within
 //    r pixels of its border at step k scores -1 there;
 //  * the best k, refined by a parabola through its neighbours' scores.
+// Every score here and below is, with options.window_shift > 0 (2 by
+// default, shifted_windows.h), the best of five windows that contain the
+// pixel: the centred one and those shifted window_shift pixels left, right,
+// up and down; where the centred window straddles a depth edge, a shifted
+// one can lie on the pixel's own surface.
 // The refined depth replaces the network's only where the search has a clear
 // answer: the best score is at least `min_ncc`, it lies strictly inside the
 // searched interval (a best score at the border means the truth may be

@@ -304,6 +304,13 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        po::value<int64_t>(&o.photometric.estimator.refinement_options.window_radius)
            ->default_value(o.photometric.estimator.refinement_options.window_radius),
        "--refinement ncc: the correlation window is (2r+1) x (2r+1) pixels.")
+      ("refine_window_shift",
+       po::value<int64_t>(&o.photometric.estimator.refinement_options.window_shift)
+           ->default_value(o.photometric.estimator.refinement_options.window_shift),
+       "--refinement ncc: score every depth at a pixel by the best of five correlation windows "
+       "that contain it, centred and shifted this many pixels left, right, up and down (at most "
+       "--refine_window_radius): a shifted window can lie on the pixel's own surface where the "
+       "centred one straddles a depth edge. 0 = the centred window alone.")
       ("refine_steps", po::value<int64_t>(&o.photometric.estimator.refinement_options.steps)
            ->default_value(o.photometric.estimator.refinement_options.steps),
        "--refinement ncc: the full-resolution search's hypotheses on each side of its start "

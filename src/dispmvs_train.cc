@@ -104,6 +104,9 @@ options (default):
                               evaluation only, with ncc: long-range planes also from the nearest
                               anchors along the row (2), row and column (4); 0 = the nearest alone
                               (--refine_trusted_plane_axis_anchors)
+  --eval_refine_window_shift S
+                              evaluation only, with ncc: the best of windows shifted by S pixels,
+                              0 = the centred window alone (--refine_window_shift)
   --eval_refine_local_plane_radius R
                               evaluation only, with ncc: local planes over (2R+1)^2 pixels, 0 = off
                               (--refine_local_plane_radius)
@@ -355,6 +358,9 @@ CommandLine Parse(int argc, char** argv) {
     }
     else if (flag == "--eval_refine_trusted_plane_axis_anchors") {
       o.eval_refinement_options.trusted_plane_axis_anchors = ParseInt(flag, value);
+    }
+    else if (flag == "--eval_refine_window_shift") {
+      o.eval_refinement_options.window_shift = ParseInt(flag, value);
     }
     else if (flag == "--eval_refine_local_plane_radius") {
       o.eval_refinement_options.local_plane_radius = ParseInt(flag, value);
