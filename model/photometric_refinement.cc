@@ -282,13 +282,14 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   // A chosen source whose window leaves its image at some hypothesis scores
   // -1 there (the worst correlation): the search does not wander off the
   // sources it was judged on (CombineSources, ScoreAlongSurface).
-  // Each pixel's score is the best of the windows shifted by window_shift
-  // that contain it (shifted_windows.h): where the centred window straddles
-  // a depth edge or a patch the source sees differently, a shifted one can
-  // still confirm the pixel's surface.
   const auto centred_score = [&](const torch::Tensor& surface) {
     return ScoreAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, surface, weights, r, margin);
   };
+  // What every hypothesis and candidate is compared by: the best of the
+  // windows shifted by window_shift that contain the pixel
+  // (shifted_windows.h). Where the centred window straddles a depth edge or
+  // a patch the source sees differently, a shifted one can still confirm
+  // the pixel's surface.
   const auto surface_score = [&](const torch::Tensor& surface) {
     return BestOfShiftedWindows(centred_score(surface), options.window_shift);
   };
@@ -298,9 +299,10 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   // shifted away from the block, and planes fitted through such pixels and
   // extended far are off (the unit test's block within 2 %: 0.988 against
   // 0.997). realval's MVS pairs within 2 % 0.626 against 0.624 with the
-  // shifted scores there as well.
-  const auto own_window_score = [&](const torch::Tensor& surface, const torch::Tensor& shifted) {
-    return options.window_shift > 0 ? centred_score(surface) : shifted;
+  // shifted scores there as well. Without shifts, the score at hand, as
+  // before them (one correlation pass less).
+  const auto own_window_score = [&](const torch::Tensor& surface, const torch::Tensor& score_at_hand) {
+    return options.window_shift > 0 ? centred_score(surface) : score_at_hand;
   };
   const torch::Tensor textured = torch::sqrt(reference_var) >= options.min_texture;
 

@@ -16,9 +16,9 @@ struct PhotometricRefinementOptions {
   // the coarse pass too, in its own pixels). Where the centred window
   // straddles a depth edge or a patch the source sees differently, a
   // shifted one can still confirm the pixel's surface. 2 since the eleventh
-  // session: realval's MVS pairs within 2 % 0.624 against 0.612, the 20
-  // generated scenes 0.5396 against 0.5342 (1: 0.621, 3: 0.621; docs/dense.md,
-  // "Shifted windows").
+  // session: realval's MVS pairs within 2 % 0.626 against 0.612, the 20
+  // generated scenes 0.5410 against 0.5342 (shift 1: 0.621, 3: 0.621;
+  // docs/dense.md, "Shifted windows").
   int64_t window_shift = 2;
   // Hypotheses on each side of the start's depth. 2 since the sweep (below)
   // joined the coarse propagation in giving the search its reach (3 before,
