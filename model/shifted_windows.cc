@@ -19,6 +19,7 @@ void CheckInputs(const torch::Tensor& score, int64_t shift) {
 
 torch::Tensor BestOfShiftedWindowsByOps(const torch::Tensor& score, int64_t shift) {
   CheckInputs(score, shift);
+  if (shift == 0) return score;
   torch::Tensor best = score.clone();
   // Along each axis, the map against its copy moved by the shift either way,
   // where they overlap; pixels whose shifted window leaves the image keep
@@ -37,6 +38,9 @@ torch::Tensor BestOfShiftedWindowsByOps(const torch::Tensor& score, int64_t shif
 
 torch::Tensor BestOfShiftedWindows(const torch::Tensor& score, int64_t shift) {
   CheckInputs(score, shift);
+  // Without shifts, nothing to compare: the refinement's scores pass
+  // through as they were before the shifts, at no cost.
+  if (shift == 0) return score;
   if (!score.device().is_cpu() || score.scalar_type() != torch::kFloat32) {
     return BestOfShiftedWindowsByOps(score, shift);
   }

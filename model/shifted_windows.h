@@ -21,10 +21,10 @@ namespace dispmvs::model {
 
 // At every pixel p of `score` ([B,1,H,W] float), the largest of score at p
 // and at p + (shift, 0), p - (shift, 0), p + (0, shift), p - (0, shift),
-// of those inside the image; a copy of score at shift 0. The value at
-// p + o is the score of the window centred there, which contains p while
-// shift is at most the window's radius. One loop on CPU float tensors,
-// LibTorch operations elsewhere. Throws std::invalid_argument unless score
+// of those inside the image; score itself (not a copy) at shift 0. The
+// value at p + o is the score of the window centred there, which contains p
+// while shift is at most the window's radius. One loop on CPU float
+// tensors, LibTorch operations elsewhere. Throws std::invalid_argument unless score
 // is [B,1,H,W] floating point and shift >= 0.
 torch::Tensor BestOfShiftedWindows(const torch::Tensor& score, int64_t shift);
 
