@@ -1,9 +1,9 @@
 // synth_generator_timing: how long synth::GenerateSample takes per scene, at
 // two sizes, in wall time and process CPU time (the fairer number on a
 // shared machine). What a training step pays for a new scene (see
-// TrainOptions::scene_reuse).
+// TrainOptions::scene_reuse), and what supersampling adds to it.
 //
-//   synth_generator_timing [samples per size, default 8]
+//   synth_generator_timing [samples per size, default 8] [supersampling, default 1]
 
 #include <chrono>
 #include <cstdio>
@@ -17,8 +17,9 @@
 
 int main(int argc, char** argv) {
   const int samples = argc > 1 ? std::atoi(argv[1]) : 8;
-  if (samples < 1) {
-    std::fprintf(stderr, "usage: synth_generator_timing [samples per size >= 1]\n");
+  const int supersampling = argc > 2 ? std::atoi(argv[2]) : 1;
+  if (samples < 1 || supersampling < 1 || supersampling > 7 || supersampling % 2 == 0) {
+    std::fprintf(stderr, "usage: synth_generator_timing [samples per size >= 1] [supersampling: 1, 3, 5 or 7]\n");
     return 2;
   }
   for (const auto& [height, width] : {std::pair<int64_t, int64_t>{256, 320}, {512, 640}}) {
@@ -26,15 +27,16 @@ int main(int argc, char** argv) {
     config.height = height;
     config.width = width;
     config.num_views = 6;
+    config.supersampling = supersampling;
     dispmvs::synth::GenerateSample(config, 0, torch::kCPU);  // warm-up
     const std::clock_t cpu_start = std::clock();
     const auto start = std::chrono::steady_clock::now();
     for (int s = 1; s <= samples; ++s) dispmvs::synth::GenerateSample(config, s, torch::kCPU);
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const double cpu_seconds = static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
-    std::printf("%lldx%lld x %d views, torch threads %d: %.3f s wall, %.3f s CPU per sample (mean of %d)\n",
-                static_cast<long long>(width), static_cast<long long>(height), config.num_views,
-                torch::get_num_threads(), seconds / samples, cpu_seconds / samples, samples);
+    std::printf("%lldx%lld x %d views, %d x %d rays per pixel, torch threads %d: %.3f s wall, %.3f s CPU per sample (mean of %d)\n",
+                static_cast<long long>(width), static_cast<long long>(height), config.num_views, supersampling,
+                supersampling, torch::get_num_threads(), seconds / samples, cpu_seconds / samples, samples);
   }
   return 0;
 }

@@ -76,6 +76,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("difficulty", po::value<double>(&config.difficulty)->default_value(config.difficulty, "1"),
        "Scene difficulty in [0, 1]: 1 is the full generator; lower values shrink the baselines, "
        "remove occluders, soften the light and narrow the per-view photometry.")
+      ("supersampling", po::value<int>(&config.supersampling)->default_value(config.supersampling),
+       "Rays per pixel along each axis (odd, 1 to 7): each pixel's colour is the mean of s x s rays "
+       "inside it, as a camera integrates light over the pixel; 1 is one ray through the centre, "
+       "which aliases textures finer than a pixel. Depths are the centre ray's either way.")
       ("photometry", po::value<std::string>(&options.photometry)->default_value(options.photometry),
        "Per-view camera response: default, or wide (exposure 0.5-2x, white balance +-15 %, gamma "
        "0.7-1.4 and vignetting up to 0.4 between views, as between real photographs; "

@@ -127,6 +127,10 @@ options (default):
                               wide (exposure 0.5-2x, white balance +-15 %, gamma 0.7-1.4,
                               vignetting up to 0.4, as between real photographs) or mixed (half
                               the scenes each); validation keeps the defaults (default)
+  --supersampling S           training: rays per pixel along each axis of the generated scenes
+                              (odd, 1-7): each pixel the mean of S x S rays, as a camera
+                              integrates light, instead of one ray that aliases textures finer
+                              than a pixel; rendering costs about S^2 as much (1)
   --batch B                   samples per step (1)
   --steps S                   total steps (1000)
   --lr LR                     Adam learning rate (2e-4)
@@ -183,6 +187,8 @@ options (default):
   --validate_every K          0 = only at the end (0)
   --val_scenes M              validation scenes (8)
   --val_seed_base S           first validation seed (1000000000)
+  --val_supersampling S       rays per pixel along each axis of the validation scenes, as
+                              --supersampling; 1 keeps the table of earlier runs (1)
   --help                      this text
 )";
 
@@ -302,6 +308,8 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--sources") o.num_sources = ParseInt(flag, value);
     else if (flag == "--source_counts") o.source_counts = ParseCounts(flag, value);
     else if (flag == "--photometry") o.photometry = value;
+    else if (flag == "--supersampling") o.supersampling = ParseInt(flag, value);
+    else if (flag == "--val_supersampling") o.val_supersampling = ParseInt(flag, value);
     else if (flag == "--batch") o.batch_size = ParseInt(flag, value);
     else if (flag == "--steps") o.steps = ParseInt(flag, value);
     else if (flag == "--lr") o.lr = ParseDouble(flag, value);
@@ -413,13 +421,21 @@ CommandLine Parse(int argc, char** argv) {
   return cl;
 }
 
+// ", S x S rays per pixel" when the validation scenes are supersampled; the
+// table's header says so, since such a table is not comparable with one of
+// point-sampled scenes.
+std::string SupersamplingNote(const dispmvs::train::TrainOptions& o) {
+  if (o.val_supersampling == 1) return "";
+  return ", " + std::to_string(o.val_supersampling) + " x " + std::to_string(o.val_supersampling) + " rays per pixel";
+}
+
 void PrintEvaluation(const CommandLine& cl) {
   const auto& o = cl.options;
   if (!cl.breakdown.empty()) {
     const double x = cl.breakdown.front();
     std::cout << "weights " << cl.evaluate_weights << ": error breakdown on " << o.num_validation_scenes
               << " validation scenes (seeds " << o.validation_seed_base << "..), " << o.width << "x"
-              << o.height << ", N = " << o.num_sources << ", x="
+              << o.height << ", N = " << o.num_sources << SupersamplingNote(o) << ", x="
               << (x == 0 ? std::string("none") : std::to_string(x).substr(0, 5)) << "\n"
               << dispmvs::train::FormatBreakdown(
                      dispmvs::train::EvaluateErrorBreakdown(cl.evaluate_weights, o, x));
@@ -428,7 +444,7 @@ void PrintEvaluation(const CommandLine& cl) {
   const auto rows = dispmvs::train::EvaluateWeights(cl.evaluate_weights, o, cl.widenings);
   std::cout << "weights " << cl.evaluate_weights << ": " << o.num_validation_scenes
             << " validation scenes (seeds " << o.validation_seed_base << "..), " << o.width << "x"
-            << o.height << ", N = " << o.num_sources << "\n";
+            << o.height << ", N = " << o.num_sources << SupersamplingNote(o) << "\n";
   for (const auto& row : rows) {
     const std::string x = row.widening == 0 ? std::string("none") : std::to_string(row.widening).substr(0, 5);
     std::printf("x=%s  %s  %s\n", x.c_str(), dispmvs::train::FormatMetrics(row.metrics).c_str(),

@@ -61,6 +61,20 @@ PhotometryRanges EasierPhotometry(const PhotometryRanges& r, double d) {
   return out;
 }
 
+// Lambertian radiance [3,H,W] of the hits [H,W] of one view.
+torch::Tensor ShadeHits(const SynthScene& s, const SynthConfig& config, const RayHits& hits,
+                        const torch::Tensor& texture_of_primitive) {
+  const int64_t height = hits.depth.size(0), width = hits.depth.size(1);
+  const torch::Tensor flat_primitive = hits.primitive.reshape({-1});
+  const torch::Tensor texture = texture_of_primitive.index_select(
+      0, torch::where(flat_primitive >= 0, flat_primitive, texture_of_primitive.size(0) - 1));
+  const torch::Tensor albedo = EvaluateAlbedo(s.scene.textures, texture, hits.uv.reshape({-1, 2}), s.scene.empty_color,
+                                              config.photos.get())
+                                   .t()
+                                   .reshape({3, height, width});
+  return ShadeLambertian(albedo, hits.normal, s.scene.light_direction, s.scene.ambient);
+}
+
 }  // namespace
 
 void SynthConfig::Check() const {
@@ -95,6 +109,9 @@ void SynthConfig::Check() const {
   if (!(difficulty >= 0 && difficulty <= 1)) fail("difficulty must be in [0, 1]");
   if (!(photo_probability >= 0 && photo_probability <= 1)) fail("photo_probability must be in [0, 1]");
   if (photos) CheckPhotoSet(*photos);
+  if (supersampling < 1 || supersampling > 7 || supersampling % 2 == 0) {
+    fail("supersampling must be odd and in [1, 7], got " + std::to_string(supersampling));
+  }
   if (march_steps < 1 || march_steps > 256 || bisection_steps < 0 || bisection_steps > 64) {
     fail("march_steps must be in [1, 256] and bisection_steps in [0, 64]");
   }
@@ -160,14 +177,24 @@ SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::
   for (int64_t v = 0; v < views; ++v) {
     const PinholeCamera& cam = s.cameras[static_cast<size_t>(v)];
     const RayHits hits = CastImage(s.scene, cam, config.height, config.width, options);
-    const torch::Tensor flat_primitive = hits.primitive.reshape({-1});
-    const torch::Tensor texture = texture_of_primitive.index_select(
-        0, torch::where(flat_primitive >= 0, flat_primitive, texture_of_primitive.size(0) - 1));
-    const torch::Tensor albedo = EvaluateAlbedo(s.scene.textures, texture, hits.uv.reshape({-1, 2}), s.scene.empty_color,
-                                                    config.photos.get())
-                                     .t()
-                                     .reshape({3, config.height, config.width});
-    const torch::Tensor radiance = ShadeLambertian(albedo, hits.normal, s.scene.light_direction, s.scene.ambient);
+    // The colour is the mean radiance of s x s rays per pixel; the depth
+    // stays that of the centre ray (bit for bit that of s = 1). Each of the
+    // s^2 - 1 other offsets is one more image-sized cast by a camera whose
+    // principal point moves the other way, rather than one cast of an image
+    // s times larger: the same rays, in tensors that stay small.
+    torch::Tensor radiance = ShadeHits(s, config, hits, texture_of_primitive);
+    const int n = config.supersampling;
+    for (int a = 0; a < n; ++a) {
+      for (int b = 0; b < n; ++b) {
+        if (2 * a == n - 1 && 2 * b == n - 1) continue;  // the centre ray, cast above
+        PinholeCamera offset = cam;
+        offset.cx = cam.cx - (b - 0.5 * (n - 1)) / n;
+        offset.cy = cam.cy - (a - 0.5 * (n - 1)) / n;
+        radiance += ShadeHits(s, config, CastImage(s.scene, offset, config.height, config.width, options),
+                              texture_of_primitive);
+      }
+    }
+    if (n > 1) radiance /= static_cast<double>(n * n);
     images.push_back(ApplyPhotometry(radiance, s.photometry[static_cast<size_t>(v)]));
     depths.push_back((hits.depth * s.scale).unsqueeze(0));
     intrinsics.push_back(IntrinsicsMatrix(cam));

@@ -57,6 +57,20 @@ struct SynthConfig {
   //  * darkness, contrast and sensor: the per-view gain, gamma and white-
   //    balance ranges narrowed around 1, noise and blur scaled by d.
   double difficulty = 1.0;
+  // Rays per pixel along each axis (odd, 1 to 7). A camera integrates light
+  // over each pixel's area, so a texture finer than the pixel grid blurs
+  // into its mean; one ray through the pixel centre instead picks one point
+  // of it, which changes from view to view (aliasing): a far textured wall
+  // then shows unrelated noise in two views, and no matcher can place it to
+  // a fraction of a pixel. With s > 1 a pixel's colour is the mean radiance
+  // of s x s rays on a regular grid inside it (offsets (k - (s - 1) / 2) / s,
+  // k = 0..s-1, a box filter), before the view's photometry, as a sensor
+  // collects light before its response curve. Depth, and everything but the
+  // colour, stays that of the centre ray (s is odd so that one of the s x s
+  // rays is the centre one), so depths are those of s = 1. 1 (the default)
+  // renders exactly the images of a configuration without the knob; the
+  // cost of rendering grows as s^2.
+  int supersampling = 1;
 
   // Throws std::invalid_argument on sizes, counts or ranges that make no sense.
   void Check() const;

@@ -249,6 +249,101 @@ TEST(GeneratorTest, DifficultyOneIsTheFullGeneratorAndLowerIsEasier) {
   EXPECT_THROW(config.Check(), std::invalid_argument);
 }
 
+// Supersampling s: each pixel's colour is the mean radiance of the s x s
+// rays at offsets (k - (s - 1) / 2) / s. Checked against an independent
+// construction: an s = 1 render s times larger in each direction, by a
+// camera whose pixel (s i + a, s j + b) looks through (j + (b - 1) / 3,
+// i + (a - 1) / 3) of the original (s = 3), averaged over 3 x 3 blocks, with
+// photometry that applies nothing.
+TEST(GeneratorTest, SupersamplingAveragesSubPixelRaysAndKeepsTheDepth) {
+  for (uint64_t seed : {3u, 11u}) {
+    SynthConfig config = SmallConfig();
+    SynthScene scene = DrawScene(config, seed);
+    for (ViewPhotometry& p : scene.photometry) p = ViewPhotometry{};
+    const SynthSample one = RenderSample(scene, config, torch::kCPU);
+    config.supersampling = 3;
+    const SynthSample three = RenderSample(scene, config, torch::kCPU);
+    EXPECT_TRUE(torch::equal(one.depths, three.depths));  // the centre ray's, bit for bit
+    EXPECT_TRUE(torch::equal(one.world_to_camera, three.world_to_camera));
+    EXPECT_TRUE(torch::equal(one.intrinsics, three.intrinsics));
+
+    SynthScene large = scene;
+    for (PinholeCamera& cam : large.cameras) {
+      cam.fx *= 3;
+      cam.fy *= 3;
+      cam.cx = 3 * cam.cx + 1;
+      cam.cy = 3 * cam.cy + 1;
+    }
+    SynthConfig large_config = SmallConfig();
+    large_config.height *= 3;
+    large_config.width *= 3;
+    const torch::Tensor expected =
+        torch::avg_pool2d(RenderSample(large, large_config, torch::kCPU).images, {3, 3}, {3, 3});
+    EXPECT_LT((three.images - expected).abs().max().item<double>(), 2e-5) << "seed " << seed;
+    // Not the centre ray alone: the images differ where texture or edges are finer than a pixel.
+    EXPECT_GT((three.images - one.images).abs().mean().item<double>(), 1e-3) << "seed " << seed;
+  }
+  SynthConfig bad = SmallConfig();
+  for (int s : {0, 2, 9}) {
+    bad.supersampling = s;
+    EXPECT_THROW(bad.Check(), std::invalid_argument) << s;
+  }
+}
+
+// What the knob is for: a texture far finer than the pixel grid. Point
+// samples of it change from view to view, its mean does not; so two views of
+// the same far wall, through their ground-truth correspondences, agree much
+// better with s = 5 than with one ray per pixel.
+TEST(GeneratorTest, SupersamplingMakesAFineFarTextureAgreeBetweenViews) {
+  SynthConfig config = SmallConfig();
+  config.height = 64;
+  config.width = 64;
+  config.num_views = 2;
+  SynthScene scene;
+  scene.scale = 1;
+  TextureSpec fine;
+  fine.pattern = Pattern::kChecker;
+  fine.color_a = {0.1, 0.1, 0.1};
+  fine.color_b = {0.9, 0.9, 0.9};
+  fine.frequency = 400;  // cells per UV unit: about 4 per pixel at this distance
+  fine.detail = 0;
+  fine.jitter = 0;
+  scene.scene.textures.push_back(fine);
+  Primitive wall;
+  wall.shape = Shape::kQuad;
+  wall.texture = 0;
+  wall.center = {0, 0, 10};
+  wall.half_size = {8, 8, 0};
+  wall.uv_unit = 16;
+  scene.scene.primitives.push_back(wall);
+  scene.scene.light_direction = Normalized(Vec3{0.2, -0.3, -1});
+  scene.scene.ambient = 1.0;
+  PinholeCamera cam = PinholeCamera::LookAt({0, 0, 0}, {0, 0, 10}, {0, -1, 0});
+  cam.fx = cam.fy = 60;
+  cam.cx = cam.cy = 31.5;
+  PinholeCamera moved = PinholeCamera::LookAt({0.37, 0.11, 0}, {0.37, 0.11, 10}, {0, -1, 0});
+  moved.fx = moved.fy = 60;
+  moved.cx = moved.cy = 31.5;
+  scene.cameras = {cam, moved};
+  scene.photometry.assign(2, ViewPhotometry{});
+
+  // The wall is fronto-parallel to both cameras: a pixel (x, y) of the first
+  // view sees the point the second sees at (x - fx tx / Z, y - fy ty / Z).
+  auto disagreement = [&](int s) {
+    config.supersampling = s;
+    const SynthSample sample = RenderSample(scene, config, torch::kCPU);
+    const double dx = 60 * 0.37 / 10, dy = 60 * 0.11 / 10;  // 2.22 and 0.66 px
+    const torch::Tensor grid = torch::stack(
+        {(torch::arange(64, torch::kFloat).view({1, 64}).expand({64, 64}) - dx) / 31.5 - 1,
+         (torch::arange(64, torch::kFloat).view({64, 1}).expand({64, 64}) - dy) / 31.5 - 1}, -1).unsqueeze(0);
+    const torch::Tensor warped = torch::grid_sampler(sample.images[1].unsqueeze(0), grid, 0, 0, true)[0];
+    return (warped - sample.images[0]).abs().narrow(1, 8, 48).narrow(2, 8, 48).mean().item<double>();
+  };
+  const double point = disagreement(1), box = disagreement(5);
+  EXPECT_GT(point, 0.1);        // point samples of the checker: unrelated noise in the two views
+  EXPECT_LT(box, 0.25 * point);  // the pixel means agree
+}
+
 TEST(GeneratorTest, RobustDepthRangeIsNearestRankQuantile) {
   // Values 1..101 (and zeros, which are ignored): the 2nd percentile is the
   // value at rank round(0.02 * 100) = 2, i.e. 3; the 98th at rank 98, i.e. 99.

@@ -219,6 +219,10 @@ TEST(SynthDatasetTest, BadOptionsGiveClearErrors) {
   EXPECT_NE(message_of([&] { WriteSynthDataset(dir.path(), 1, 1, options); }).find("height and width"),
             std::string::npos);
   options = SmallOptions();
+  options.config.supersampling = 4;  // even: no centre ray
+  EXPECT_NE(message_of([&] { WriteSynthDataset(dir.path(), 1, 1, options); }).find("supersampling must be odd"),
+            std::string::npos);
+  options = SmallOptions();
   options.ply_stride = 0;
   EXPECT_NE(message_of([&] { WriteSynthWorkspace(dir.path() / "ws", options, 1); }).find("ply_stride"),
             std::string::npos);

@@ -139,6 +139,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "lr_warmup_steps") return "0";
   if (key == "source_counts") return "";
   if (key == "photometry") return "default";
+  if (key == "supersampling") return "1";
   return std::nullopt;
 }
 
@@ -234,7 +235,8 @@ Settings RunSettings(const TrainOptions& o) {
           {"difficulty_start", std::to_string(o.difficulty_start)},
           {"difficulty_ramp_steps", std::to_string(o.difficulty_ramp_steps)},
           {"source_counts", JoinCounts(o.source_counts)},
-          {"photometry", o.photometry}};
+          {"photometry", o.photometry},
+          {"supersampling", std::to_string(o.supersampling)}};
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,

@@ -118,6 +118,10 @@ void TrainOptions::Check(bool for_training) const {
            std::to_string(count));
     }
   }
+  for (const auto& [name, s] : {std::pair<const char*, int64_t>{"supersampling", supersampling},
+                                 {"val_supersampling", val_supersampling}}) {
+    if (s < 1 || s > 7 || s % 2 == 0) fail(std::string(name) + " must be odd and in [1, 7], got " + std::to_string(s));
+  }
   if (photometry != "default" && photometry != "wide" && photometry != "mixed") {
     fail("photometry must be default, wide or mixed, got '" + photometry + "'");
   }

@@ -111,6 +111,15 @@ struct TrainOptions {
   // between real photographs) or "mixed" (each scene one of the two, by its
   // seed). Validation scenes keep the defaults.
   std::string photometry = "default";
+  // Rays per pixel along each axis in the generated training scenes
+  // (synth::SynthConfig::supersampling, odd, 1 to 7): > 1 renders each
+  // pixel as the mean of s x s rays, as a camera integrates light over the
+  // pixel, instead of one ray that aliases textures finer than a pixel.
+  // Rendering costs about s^2 as much. Validation follows val_supersampling.
+  int64_t supersampling = 1;
+  // The same for the validation scenes (and EvaluateWeights' table). 1 keeps
+  // the table comparable with earlier runs (point-sampled images).
+  int64_t val_supersampling = 1;
   // GRU iterations of the coarse stage in training steps (0 = the config's):
   // cheaper steps; validation and the saved weights keep the config's.
   int64_t train_coarse_iterations = 0;

@@ -16,6 +16,7 @@
 #include "train/error_breakdown.h"
 #include "train/step_log_test_util.h"
 #include "train/training_samples.h"
+#include "train/validation.h"
 
 namespace dispmvs::train {
 namespace {
@@ -414,6 +415,50 @@ TEST(TrainerV2Test, WidePhotometryChangesTrainingImagesOnly) {
   EXPECT_THROW(Train(wide, again), std::runtime_error);
 }
 
+// --supersampling renders the training scenes' colours from 3 x 3 rays per
+// pixel: same geometry, other images, a run setting; the validation scenes
+// follow --val_supersampling alone.
+TEST(TrainerV2Test, SupersamplingChangesTrainingImagesOnlyAndValidationFollowsItsOwnKnob) {
+  TempDir tmp;
+  TrainOptions o = TinyV2Options(tmp.path() / "ss", 2);
+  fs::create_directories(o.checkpoint_dir);
+  std::ostringstream console;
+  internal::Logger log(console, tmp.path() / "log.txt");
+  TrainOptions fine = o;
+  fine.supersampling = 3;
+  internal::TrainingSamples plain_samples(o, torch::kCPU, log);
+  internal::TrainingSamples fine_samples(fine, torch::kCPU, log);
+  const auto plain = plain_samples.ForStep(0), sharp = fine_samples.ForStep(0);
+  ASSERT_EQ(plain.size(), sharp.size());
+  for (size_t i = 0; i < plain.size(); ++i) {
+    EXPECT_TRUE(torch::equal(plain[i].depths, sharp[i].depths));
+    EXPECT_TRUE(torch::equal(plain[i].world_to_camera, sharp[i].world_to_camera));
+    EXPECT_FALSE(torch::equal(plain[i].images, sharp[i].images));
+  }
+  EXPECT_NE(console.str().find("supersampling: 3 x 3 rays per pixel"), std::string::npos);
+
+  // Validation: the same scenes whatever the training's supersampling.
+  const auto val_plain = internal::ValidationScenes(o, torch::kCPU);
+  const auto val_fine_training = internal::ValidationScenes(fine, torch::kCPU);
+  TrainOptions val_fine = o;
+  val_fine.val_supersampling = 3;
+  const auto val_sharp = internal::ValidationScenes(val_fine, torch::kCPU);
+  ASSERT_EQ(val_plain.size(), val_sharp.size());
+  for (size_t i = 0; i < val_plain.size(); ++i) {
+    EXPECT_TRUE(torch::equal(val_plain[i].images, val_fine_training[i].images));
+    EXPECT_TRUE(torch::equal(val_plain[i].depths, val_sharp[i].depths));
+    EXPECT_FALSE(torch::equal(val_plain[i].images, val_sharp[i].images));
+  }
+
+  std::ostringstream train_log;
+  Train(fine, train_log);
+  EXPECT_NE(train_log.str().find("step 2/2  loss "), std::string::npos) << train_log.str();
+  fine.steps = 3;
+  fine.supersampling = 1;  // resuming with other training images is refused
+  std::ostringstream again;
+  EXPECT_THROW(Train(fine, again), std::runtime_error);
+}
+
 TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnce) {
   TempDir tmp;
   std::ostringstream log;
@@ -625,6 +670,12 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o = good;
   o.photometry = "vivid";
   ExpectRejected(o, "photometry");
+  o = good;
+  o.supersampling = 2;
+  ExpectRejected(o, "supersampling");
+  o = good;
+  o.val_supersampling = 9;
+  ExpectRejected(o, "val_supersampling must be odd");
   o = good;
   o.depth_loss = "l2";
   ExpectRejected(o, "depth_loss");

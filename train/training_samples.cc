@@ -143,6 +143,11 @@ TrainingSamples::TrainingSamples(const TrainOptions& options, torch::Device devi
     : options_(options), device_(device), synth_config_(SynthConfigFor(options)) {
   // Training scenes only (TrainingSample): validation and the confidence
   // fit keep SynthConfigFor's defaults.
+  synth_config_.supersampling = static_cast<int>(options.supersampling);
+  if (options.supersampling > 1) {
+    log.Line("supersampling: " + std::to_string(options.supersampling) + " x " + std::to_string(options.supersampling) +
+             " rays per pixel in the generated training scenes");
+  }
   if (options.photometry == "wide") {
     log.Line("photometry: wide (exposure 0.5-2x, white balance +-15 %, gamma 0.7-1.4, vignetting <= 0.4)");
   } else if (options.photometry == "mixed") {

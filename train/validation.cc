@@ -102,7 +102,8 @@ void CheckHintAvailable(DispMvsNet& net, double widening, const std::string& con
 }
 
 std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, torch::Device device) {
-  const auto config = SynthConfigFor(options);
+  auto config = SynthConfigFor(options);
+  config.supersampling = static_cast<int>(options.val_supersampling);
   std::vector<synth::SynthSample> scenes;
   for (int64_t i = 0; i < options.num_validation_scenes; ++i) {
     scenes.push_back(GenerateUsableSample(config, options.validation_seed_base + i, device));
