@@ -4,7 +4,10 @@
 # only, never committed, never trained on), one table per set: per pair the
 # share of all ground-truth pixels within 1 / 2 / 5 % (<X%all of dispmvs_eval,
 # a missing prediction counting as wrong), photometric and geometric, and the
-# mean over the pairs of each set (pairs named SET_NNN: mvs_001 -> set mvs).
+# mean over the pairs of each set (pairs named SET_NNN: mvs_001 -> set mvs);
+# then where the pixels lie (dispmvs_eval --regions: seen by the pair's other
+# view, hidden there, outside it; the seen ones by distance to a depth edge),
+# pooled over each set's pixels.
 #
 #   bench/realval_eval.sh BUILD_DIR REALVAL_DIR OUT_DIR [options] [-- dispmvs_colmap options]
 #
@@ -69,7 +72,7 @@ for source in "$realval"/$pairs_glob/; do
       > "$ws/dispmvs_colmap.log" 2>&1 ||
       { echo "error: dispmvs_colmap failed on $pair (see $ws/dispmvs_colmap.log)" >&2; exit 1; }
     "$build/src/dispmvs_eval" --workspace_path "$ws" \
-      --types dispmvs.photometric,dispmvs.geometric --tsv "$ws/eval.tsv.tmp" > "$ws/eval.txt"
+      --types dispmvs.photometric,dispmvs.geometric --regions --tsv "$ws/eval.tsv.tmp" > "$ws/eval.txt"
     mv "$ws/eval.tsv.tmp" "$ws/eval.tsv"
   fi
   # depth TYPE views gt_pixels predicted within_1 within_2 within_5 ...
@@ -95,3 +98,30 @@ awk -F'\t' 'NR > 1 {
              w2[key] / n[key], w5[key] / n[key], n[key]
     }
   }' "$summary"
+
+# Per set and type, pooled over the pairs' pixels: each region's share of the
+# GT pixels and its pixels within 2 %.
+for source in "$realval"/$pairs_glob/; do
+  pair=$(basename "$source")
+  [ -f "$out/$pair/eval.tsv" ] || continue
+  awk -F'\t' -v pair="$pair" '$1 == "depth" || $1 == "region" { print pair "\t" $0 }' "$out/$pair/eval.tsv"
+done | awk -F'\t' '
+  { set = $1; sub(/_[^_]*$/, "", set) }
+  $2 == "depth" { all[set "\t" $3] += $5 }
+  $2 == "region" {
+    key = set "\t" $3
+    if (!((key, $4) in gt)) { names[key, ++count[key]] = $4 }
+    gt[key, $4] += $5; w2[key, $4] += $7
+    if (!(key in seen_key)) { seen_key[key] = 1; order[++keys] = key }
+  }
+  END {
+    for (k = 1; k <= keys; ++k) {
+      key = order[k]; split(key, part, "\t")
+      printf "%s, %s: where the GT pixels lie (pooled): share / within 2 %%\n", part[1], part[2]
+      for (i = 1; i <= count[key]; ++i) {
+        name = names[key, i]
+        printf "  %-34s %.3f / %.3f\n", name, gt[key, name] / all[key], w2[key, name] / gt[key, name]
+      }
+      printf "\n"
+    }
+  }'

@@ -56,6 +56,28 @@ void PrintConfidenceRanking(const WorkspaceEvalReport& report, std::ostream& out
   PrintTable(rows, out);
 }
 
+// With --regions: each type's pixels by region (error_regions.h).
+void PrintErrorRegions(const WorkspaceEvalReport& report, std::ostream& out) {
+  std::vector<Row> rows;
+  rows.push_back({"type", "region", "share", "<1%all", "<2%all", "<5%all"});
+  for (const TypeDepthResult& type : report.types) {
+    if (type.regions.gt_pixels == 0) continue;
+    for (const auto& [name, sums] : RegionRows(type.regions)) {
+      const auto share = [&](int64_t count, int64_t of) {
+        return Percent(of > 0 ? static_cast<double>(count) / static_cast<double>(of) : std::nan(""));
+      };
+      rows.push_back({type.type, name, share(sums.gt_pixels, type.regions.gt_pixels),
+                      share(sums.within_1, sums.gt_pixels), share(sums.within_2, sums.gt_pixels),
+                      share(sums.within_5, sums.gt_pixels)});
+    }
+  }
+  if (rows.size() == 1) return;
+  out << "\nerror regions: the GT pixels by whether another view with GT sees them (hidden: behind a "
+         "nearer surface there), the seen ones by their distance to the nearest GT depth edge; share of "
+         "all GT pixels, and the class's pixels within 1 / 2 / 5 % (a missing prediction = miss)\n";
+  PrintTable(rows, out);
+}
+
 // ---- TSV ----
 
 // Exact and round-trippable: 17 significant digits, "nan" for NaN.
@@ -154,6 +176,7 @@ void PrintReport(const WorkspaceEvalReport& report, bool per_view, std::ostream&
   PrintTable(rows, out);
   for (const std::string& note : notes) out << note << '\n';
   PrintConfidenceRanking(report, out);
+  PrintErrorRegions(report, out);
 
   if (!report.gt_cloud) return;
   const GtCloudInfo& gt = *report.gt_cloud;
@@ -321,6 +344,15 @@ std::string ReportToTsv(const WorkspaceEvalReport& report) {
       out += "\t" + TsvNumber(type.confidence_ranking.ShareWithin2AtCoverage(coverage));
     }
     out += "\n";
+  }
+  out += "#region\ttype\tregion\tgt_pixels\twithin_1\twithin_2\twithin_5\n";
+  for (const TypeDepthResult& type : report.types) {
+    if (type.regions.gt_pixels == 0) continue;
+    for (const auto& [name, sums] : RegionRows(type.regions)) {
+      out += "region\t" + TsvField(type.type, "depth-map type") + "\t" + name + "\t" + std::to_string(sums.gt_pixels) +
+             "\t" + std::to_string(sums.within_1) + "\t" + std::to_string(sums.within_2) + "\t" +
+             std::to_string(sums.within_5) + "\n";
+    }
   }
   out += "#cloud\tply\tpoints\tgt_points\taccuracy\tcompleteness\toverall\tprecision\trecall\t"
          "fscore\ttau\tcutoff\n";

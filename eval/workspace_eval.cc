@@ -196,8 +196,8 @@ struct TypeSums {
 // options.png_dir is set.
 void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::SparseModel& model,
                    const fs::path& gt_dir, const colmap_io::Image& image,
-                   const WorkspaceEvalOptions& options, std::vector<TypeSums>* sums,
-                   PointCloud* gt_cloud, WorkspaceEvalReport* report) {
+                   const WorkspaceEvalOptions& options, const RegionLabels* region_labels,
+                   std::vector<TypeSums>* sums, PointCloud* gt_cloud, WorkspaceEvalReport* report) {
   const fs::path gt_path = gt_dir / (image.name + ".bin");
   const colmap_io::DenseArray gt = ReadDepthMap(gt_path, "ground-truth depth map");
   const colmap_io::Camera& camera = model.cameras.at(image.camera_id);
@@ -260,7 +260,7 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
     DepthMetricSums view_sums;
     DisparityMetricSums disparity_sums;
     try {
-      view_sums = SumDepthMetrics(map, gt, write_png || confidence ? &rel_error : nullptr);
+      view_sums = SumDepthMetrics(map, gt, write_png || confidence || region_labels ? &rel_error : nullptr);
       if (disparity_geometry) {
         disparity_sums = SumDisparityMetrics(
             map, gt, disparity_geometry->focal * disparity_geometry->partner.baseline);
@@ -285,6 +285,7 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
     view.disparity_geometry = disparity_geometry;
     view.disparity = Finalize(disparity_sums);
     report->types[t].views.push_back(std::move(view));
+    if (region_labels) report->types[t].regions += SumErrorRegions(rel_error, *region_labels);
     if (confidence) {
       report->types[t].confidence_ranking += SumConfidenceRanking(rel_error, *confidence);
       ++report->types[t].views_with_confidence;
@@ -292,6 +293,36 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
     (*sums)[t].depth += view_sums;
     (*sums)[t].disparity += disparity_sums;
   }
+}
+
+// Every GT map of `gt.with_gt`, in its order (for the region labels, which
+// read all the other views' ground truth).
+std::vector<colmap_io::DenseArray> ReadAllGroundTruth(const colmap_io::SparseModel& model,
+                                                     const GroundTruthImages& gt) {
+  std::vector<colmap_io::DenseArray> maps;
+  for (const colmap_io::Image* image : gt.with_gt) {
+    const fs::path path = gt.dir / (image->name + ".bin");
+    maps.push_back(ReadDepthMap(path, "ground-truth depth map"));
+    const colmap_io::Camera& camera = model.cameras.at(image->camera_id);
+    if (!IsCleanScale(maps.back().width(), maps.back().height(), static_cast<int>(camera.width),
+                      static_cast<int>(camera.height))) {
+      throw IoError(path.string(), "ground-truth depth map is " + SizeText(maps.back().width(), maps.back().height()) +
+                                       " but its camera is " + SizeText(camera.width, camera.height));
+    }
+  }
+  return maps;
+}
+
+// The region labels of view `index` of `gt.with_gt` against all the others.
+RegionLabels LabelRegionsOfView(const colmap_io::SparseModel& model, const GroundTruthImages& gt,
+                                const std::vector<colmap_io::DenseArray>& maps, std::size_t index) {
+  std::vector<OtherView> others;
+  for (std::size_t j = 0; j < gt.with_gt.size(); ++j) {
+    if (j == index) continue;
+    others.push_back({&maps[j], &model.cameras.at(gt.with_gt[j]->camera_id), gt.with_gt[j]});
+  }
+  const colmap_io::Image& image = *gt.with_gt[index];
+  return LabelRegions(maps[index], model.cameras.at(image.camera_id), image, others);
 }
 
 // The GT cloud (from ground_truth/points.ply, else `cloud_from_maps`), its
@@ -362,8 +393,13 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
   // Depth maps, view by view (each GT read once).
   std::vector<TypeSums> sums(report.types.size());
   PointCloud gt_cloud;
-  for (const colmap_io::Image* image : gt.with_gt) {
-    EvaluateImage(workspace, model, gt.dir, *image, options, &sums,
+  const std::vector<colmap_io::DenseArray> gt_maps = options.regions ? ReadAllGroundTruth(model, gt) :
+                                                                         std::vector<colmap_io::DenseArray>{};
+  for (std::size_t i = 0; i < gt.with_gt.size(); ++i) {
+    const colmap_io::Image* image = gt.with_gt[i];
+    std::optional<RegionLabels> labels;
+    if (options.regions) labels = LabelRegionsOfView(model, gt, gt_maps, i);
+    EvaluateImage(workspace, model, gt.dir, *image, options, labels ? &*labels : nullptr, &sums,
                   gt_cloud_from_maps ? &gt_cloud : nullptr, &report);
   }
   for (std::size_t t = 0; t < report.types.size(); ++t) {

@@ -27,6 +27,7 @@
 #include "eval/cloud_metrics.h"
 #include "eval/confidence_ranking.h"
 #include "eval/depth_metrics.h"
+#include "eval/error_regions.h"
 #include "eval/rectified_pair.h"
 
 namespace dispmvs::eval {
@@ -50,6 +51,11 @@ struct WorkspaceEvalOptions {
   int gt_stride = 1;
   // Relative error shown at the top of the error PNGs' colour scale.
   double png_max_rel_error = 0.05;
+  // Split each type's metrics by where the pixels lie (error_regions.h):
+  // seen by another view with GT, hidden there, outside it; seen pixels by
+  // distance to the nearest GT depth edge. Reads every GT map first and keeps
+  // them all in memory (each view is labelled against all the others).
+  bool regions = false;
 
   void Check() const;  // std::invalid_argument naming the field
 };
@@ -92,6 +98,8 @@ struct TypeDepthResult {
   // size; views_with_confidence of `views` had one.
   ConfidenceRankingSums confidence_ranking;
   int views_with_confidence = 0;
+  // With WorkspaceEvalOptions::regions: the metrics' pixels by region.
+  ErrorRegionSums regions;
   bool evaluated() const { return !views.empty(); }
 };
 

@@ -111,6 +111,18 @@ their run recorded why (WS/stereo/dispmvs_records/NAME.txt). Each is named
 after the table with that reason ("warning: NAME has no TYPE map: ..."), and
 the exit status is then 1: the numbers above leave those views out.
 
+--regions splits each TYPE's pixels by where they lie, from the ground
+truth alone: seen by another view with GT (its point inside that view, not
+behind that view's GT surface by more than 3 %; a hole in that GT counts as
+seen), hidden (inside another
+view, but behind a nearer surface in all of them), outside every other view;
+and the seen ones by their distance (pixels along rows and columns) to the
+nearest GT depth edge (neighbours whose depths differ by more than about
+5 %): 0-1, 2-3, 4-6, 7-12, 13+. Per region: its share of the GT pixels and
+the share of its pixels within 1 / 2 / 5 % (missing = miss). In a two-view
+pair it says what the second view lets a matcher see; it reads every GT map
+first and keeps them in memory.
+
 --tsv FILE writes a summary for scripts that add up many workspaces exactly:
 tab-separated, '#' lines are comments, a '#' header line with the column
 names before each kind of record, then one record per depth TYPE
@@ -121,7 +133,8 @@ names before each kind of record, then one record per depth TYPE
 view has a rectified partner) and one record per --ply
   cloud PLY points gt_points accuracy completeness overall precision recall
         fscore tau cutoff
-(%.17g, "nan" for NaN). E.g. <2%all over workspaces:
+(%.17g, "nan" for NaN), and with --regions one record per TYPE and region
+  region TYPE REGION gt_pixels within_1 within_2 within_5. E.g. <2%all over workspaces:
   awk -F'\t' '$1 == "depth" && $2 == T { g += $4; w += $7 } END { print w / g }' T=dispmvs.geometric */eval.tsv
 
 Options)";
@@ -186,6 +199,8 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("png_dir", po::value<std::string>(&o.eval.png_dir),
        "Write colourised depth and relative-error PNGs here (see above).")
       ("per_view", po::bool_switch(&o.per_view), "Print one row per view under each TYPE.")
+      ("regions", po::bool_switch(&o.eval.regions),
+       "Split each TYPE's pixels by visibility in the other views and distance to a depth edge (see above).")
       ("tau", po::value<double>(&o.eval.tau)->default_value(0),
        "Precision/recall threshold in scene units; 0 = --tau_rel x GT diagonal.")
       ("cutoff", po::value<double>(&o.eval.cutoff)->default_value(0),
@@ -213,7 +228,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
     }
   }
   if (values.count("compare") > 0) {
-    for (const char* other : {"types", "ply", "tsv", "png_dir"}) {
+    for (const char* other : {"types", "ply", "tsv", "png_dir", "regions"}) {
       if (values.count(other) > 0 && !values[other].defaulted()) {
         throw std::invalid_argument(std::string("--") + other +
                                     " scores against ground truth; --compare does not use it");

@@ -591,6 +591,49 @@ TEST_F(EvalCliTest, TsvAgreesWithJson) {
   EXPECT_GE(abs_rel_sum.size(), 15u) << abs_rel_sum;
 }
 
+// --regions: every GT pixel in exactly one visibility class, the seen ones
+// in exactly one edge ring, and the classes' counts add up to the depth
+// record's (b sees a's right part; a sees b's left part).
+TEST_F(EvalCliTest, RegionsSplitEveryGroundTruthPixelOnce) {
+  const fs::path tsv = dir_.path() / "regions.tsv";
+  const RunResult run = RunEval(dir_, Ws() + " --types dispmvs.geometric --regions --tsv '" + tsv.string() + "'");
+  ASSERT_EQ(run.status, 0) << run.out << run.err;
+  EXPECT_NE(run.out.find("error regions: the GT pixels by whether another view"), std::string::npos) << run.out;
+  EXPECT_NE(run.out.find("seen, 13+ px from a depth edge"), std::string::npos) << run.out;
+  int64_t depth_gt = -1, depth_within_2 = -1, visibility_gt = 0, visibility_within_2 = 0, seen_gt = -1, rings_gt = 0;
+  int region_rows = 0;
+  for (const std::string& line : Lines(ReadFileBytes(tsv))) {
+    const std::vector<std::string> f = Fields(line);
+    if (f[0] == "depth") {
+      depth_gt = std::stoll(f[3]);
+      depth_within_2 = std::stoll(f[6]);
+    } else if (f[0] == "region") {
+      ASSERT_EQ(f.size(), 7u) << line;
+      EXPECT_EQ(f[1], "dispmvs.geometric");
+      ++region_rows;
+      const int64_t gt = std::stoll(f[3]);
+      EXPECT_GE(gt, std::stoll(f[5]));
+      if (f[2].rfind("seen, ", 0) == 0) {
+        rings_gt += gt;
+      } else {
+        visibility_gt += gt;
+        visibility_within_2 += std::stoll(f[5]);
+        if (f[2] == "seen by another view") seen_gt = gt;
+      }
+    }
+  }
+  EXPECT_EQ(region_rows, 8);
+  EXPECT_EQ(depth_gt, 96);
+  EXPECT_EQ(visibility_gt, depth_gt);
+  EXPECT_EQ(visibility_within_2, depth_within_2);
+  EXPECT_GT(seen_gt, 0);
+  EXPECT_LT(seen_gt, depth_gt);  // each view's far side lies outside the other
+  EXPECT_EQ(rings_gt, seen_gt);
+
+  ExpectError(RunEval(dir_, Ws() + " --compare dispmvs.geometric,geometric --regions"),
+              "--regions scores against ground truth; --compare does not use it");
+}
+
 TEST_F(EvalCliTest, HelpAndErrors) {
   RunResult run = RunEval(dir_, "--help");
   EXPECT_EQ(run.status, 0);
