@@ -76,6 +76,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("difficulty", po::value<double>(&config.difficulty)->default_value(config.difficulty, "1"),
        "Scene difficulty in [0, 1]: 1 is the full generator; lower values shrink the baselines, "
        "remove occluders, soften the light and narrow the per-view photometry.")
+      ("specular_probability",
+       po::value<double>(&config.specular_probability)->default_value(config.specular_probability, "0"),
+       "Share of the objects and walls with a glossy coat: a white highlight that stands elsewhere "
+       "on the surface in every view (strength 0.15-0.6, Blinn-Phong exponent 8-256).")
       ("supersampling", po::value<int>(&config.supersampling)->default_value(config.supersampling),
        "Rays per pixel along each axis (odd, 1 to 7): each pixel's colour is the mean of s x s rays "
        "inside it, as a camera integrates light over the pixel; 1 is one ray through the centre, "

@@ -127,6 +127,8 @@ options (default):
                               wide (exposure 0.5-2x, white balance +-15 %, gamma 0.7-1.4,
                               vignetting up to 0.4, as between real photographs) or mixed (half
                               the scenes each); validation keeps the defaults (default)
+  --specular_probability P    training: share of the generated scenes' objects and walls with a
+                              glossy coat, a highlight that moves with the viewpoint (0)
   --supersampling S           training: rays per pixel along each axis of the generated scenes
                               (odd, 1-7): each pixel the mean of S x S rays, as a camera
                               integrates light, instead of one ray that aliases textures finer
@@ -309,6 +311,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--source_counts") o.source_counts = ParseCounts(flag, value);
     else if (flag == "--photometry") o.photometry = value;
     else if (flag == "--supersampling") o.supersampling = ParseInt(flag, value);
+    else if (flag == "--specular_probability") o.specular_probability = ParseDouble(flag, value);
     else if (flag == "--val_supersampling") o.val_supersampling = ParseInt(flag, value);
     else if (flag == "--batch") o.batch_size = ParseInt(flag, value);
     else if (flag == "--steps") o.steps = ParseInt(flag, value);

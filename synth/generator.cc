@@ -15,7 +15,7 @@ namespace {
 
 // Independent random streams, so that e.g. the drawn scale does not change
 // which scene a seed gives.
-enum Stream : uint64_t { kRigStream = 1, kSceneStream = 2, kPhotometryStream = 3, kScaleStream = 4 };
+enum Stream : uint64_t { kRigStream = 1, kSceneStream = 2, kPhotometryStream = 3, kScaleStream = 4, kMaterialStream = 5 };
 
 RigKind DrawRig(const SynthConfig& c, Rng& rng) {
   const double weights[kNumRigKinds] = {c.p_table, c.p_walkthrough, c.p_turntable, c.p_outdoor};
@@ -61,18 +61,69 @@ PhotometryRanges EasierPhotometry(const PhotometryRanges& r, double d) {
   return out;
 }
 
-// Lambertian radiance [3,H,W] of the hits [H,W] of one view.
-torch::Tensor ShadeHits(const SynthScene& s, const SynthConfig& config, const RayHits& hits,
-                        const torch::Tensor& texture_of_primitive) {
+// Per-primitive values a view's pixels look up by the primitive they hit,
+// with one more entry at the end for pixels that hit nothing.
+struct PrimitiveTables {
+  torch::Tensor texture;               // [P+1] int64, -1 last
+  torch::Tensor specular, shininess;   // [P+1] floating, 0 last; undefined when no primitive is glossy
+};
+
+PrimitiveTables MakePrimitiveTables(const SynthScene& s, const torch::TensorOptions& real) {
+  std::vector<int64_t> texture_ids;
+  std::vector<double> specular, shininess;
+  bool glossy = false;
+  for (const Primitive& p : s.scene.primitives) {
+    texture_ids.push_back(p.texture);
+    specular.push_back(p.specular);
+    shininess.push_back(p.shininess);
+    glossy = glossy || p.specular > 0;
+  }
+  texture_ids.push_back(-1);
+  specular.push_back(0);
+  shininess.push_back(1);
+  PrimitiveTables tables;
+  tables.texture = torch::tensor(texture_ids, torch::kLong).to(real.device());
+  if (glossy) {
+    tables.specular = torch::tensor(specular, torch::kDouble).to(real);
+    tables.shininess = torch::tensor(shininess, torch::kDouble).to(real);
+  }
+  return tables;
+}
+
+// Unit world vectors [H,W,3] from what each pixel of `camera` sees towards
+// the camera: minus its ray's direction.
+torch::Tensor TowardsCamera(const PinholeCamera& camera, int64_t height, int64_t width,
+                            const torch::TensorOptions& real) {
+  const torch::Tensor x = (torch::arange(width, real).view({1, width}).expand({height, width}) - camera.cx) / camera.fx;
+  const torch::Tensor y = (torch::arange(height, real).view({height, 1}).expand({height, width}) - camera.cy) / camera.fy;
+  const torch::Tensor ray_camera = torch::stack({x, y, torch::ones_like(x)}, 2);
+  const Mat3& r = camera.rotation;
+  const torch::Tensor rotation = torch::tensor({r.m[0], r.m[1], r.m[2], r.m[3], r.m[4], r.m[5], r.m[6], r.m[7], r.m[8]},
+                                               torch::kDouble).to(real).view({3, 3});
+  const torch::Tensor ray_world = torch::matmul(ray_camera, rotation);  // row vector times R = (R^T d)^T
+  return -ray_world / ray_world.norm(2, 2, true);
+}
+
+// Radiance [3,H,W] of the hits [H,W] of one view by `camera`: Lambertian,
+// plus the glossy primitives' highlights.
+torch::Tensor ShadeHits(const SynthScene& s, const SynthConfig& config, const PinholeCamera& camera,
+                        const RayHits& hits, const PrimitiveTables& tables) {
   const int64_t height = hits.depth.size(0), width = hits.depth.size(1);
   const torch::Tensor flat_primitive = hits.primitive.reshape({-1});
-  const torch::Tensor texture = texture_of_primitive.index_select(
-      0, torch::where(flat_primitive >= 0, flat_primitive, texture_of_primitive.size(0) - 1));
+  const torch::Tensor entry = torch::where(flat_primitive >= 0, flat_primitive, tables.texture.size(0) - 1);
+  const torch::Tensor texture = tables.texture.index_select(0, entry);
   const torch::Tensor albedo = EvaluateAlbedo(s.scene.textures, texture, hits.uv.reshape({-1, 2}), s.scene.empty_color,
                                               config.photos.get())
                                    .t()
                                    .reshape({3, height, width});
-  return ShadeLambertian(albedo, hits.normal, s.scene.light_direction, s.scene.ambient);
+  torch::Tensor radiance = ShadeLambertian(albedo, hits.normal, s.scene.light_direction, s.scene.ambient);
+  if (tables.specular.defined()) {
+    const torch::Tensor specular = tables.specular.index_select(0, entry).view({height, width});
+    const torch::Tensor shininess = tables.shininess.index_select(0, entry).view({height, width});
+    const torch::Tensor view = TowardsCamera(camera, height, width, hits.normal.options());
+    radiance = radiance + ShadeSpecular(hits.normal, view, s.scene.light_direction, specular, shininess).unsqueeze(0);
+  }
+  return radiance;
 }
 
 }  // namespace
@@ -109,6 +160,7 @@ void SynthConfig::Check() const {
   if (!(difficulty >= 0 && difficulty <= 1)) fail("difficulty must be in [0, 1]");
   if (!(photo_probability >= 0 && photo_probability <= 1)) fail("photo_probability must be in [0, 1]");
   if (photos) CheckPhotoSet(*photos);
+  if (!(specular_probability >= 0 && specular_probability <= 1)) fail("specular_probability must be in [0, 1]");
   if (supersampling < 1 || supersampling > 7 || supersampling % 2 == 0) {
     fail("supersampling must be odd and in [1, 7], got " + std::to_string(supersampling));
   }
@@ -149,6 +201,14 @@ SynthScene DrawScene(const SynthConfig& config, uint64_t seed) {
     }
     out.scene.ambient += 0.5 * (1.0 - d) * (1.0 - out.scene.ambient);
   }
+  if (config.specular_probability > 0) {
+    Rng material_rng = root.Fork(kMaterialStream);
+    for (Primitive& p : out.scene.primitives) {
+      if (!material_rng.Bernoulli(config.specular_probability)) continue;
+      p.specular = material_rng.Uniform(0.15, 0.6);
+      p.shininess = material_rng.LogUniform(8, 256);
+    }
+  }
   out.scale = scale_rng.LogUniform(config.scale_min, config.scale_max);
   return out;
 }
@@ -166,12 +226,7 @@ SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::
   options.bisection_steps = config.bisection_steps;
   const auto real = torch::TensorOptions().dtype(config.dtype).device(device);
 
-  // Texture of each primitive, plus -1 (no surface) in a last entry that
-  // pixels without a hit (primitive -1) are pointed at.
-  std::vector<int64_t> texture_ids;
-  for (const Primitive& p : s.scene.primitives) texture_ids.push_back(p.texture);
-  texture_ids.push_back(-1);
-  const torch::Tensor texture_of_primitive = torch::tensor(texture_ids, torch::kLong).to(device);
+  const PrimitiveTables tables = MakePrimitiveTables(s, real);
 
   std::vector<torch::Tensor> images, depths, intrinsics, extrinsics;
   for (int64_t v = 0; v < views; ++v) {
@@ -182,7 +237,7 @@ SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::
     // s^2 - 1 other offsets is one more image-sized cast by a camera whose
     // principal point moves the other way, rather than one cast of an image
     // s times larger: the same rays, in tensors that stay small.
-    torch::Tensor radiance = ShadeHits(s, config, hits, texture_of_primitive);
+    torch::Tensor radiance = ShadeHits(s, config, cam, hits, tables);
     const int n = config.supersampling;
     for (int a = 0; a < n; ++a) {
       for (int b = 0; b < n; ++b) {
@@ -190,8 +245,8 @@ SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::
         PinholeCamera offset = cam;
         offset.cx = cam.cx - (b - 0.5 * (n - 1)) / n;
         offset.cy = cam.cy - (a - 0.5 * (n - 1)) / n;
-        radiance += ShadeHits(s, config, CastImage(s.scene, offset, config.height, config.width, options),
-                              texture_of_primitive);
+        radiance += ShadeHits(s, config, offset, CastImage(s.scene, offset, config.height, config.width, options),
+                              tables);
       }
     }
     if (n > 1) radiance /= static_cast<double>(n * n);

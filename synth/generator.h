@@ -71,6 +71,14 @@ struct SynthConfig {
   // renders exactly the images of a configuration without the knob; the
   // cost of rendering grows as s^2.
   int supersampling = 1;
+  // Share of the primitives with a glossy coat (Primitive::specular): each
+  // is glossy with this probability, of strength uniform in [0.15, 0.6] and
+  // shininess log-uniform in [8, 256] (a broad sheen to a tight highlight),
+  // drawn from a stream of their own. Real surfaces (paint, varnish, plastic,
+  // tiles) are not Lambertian: a highlight stands at another place on the
+  // surface in each view. 0 (the default) renders exactly the images of a
+  // configuration without the knob.
+  double specular_probability = 0;
 
   // Throws std::invalid_argument on sizes, counts or ranges that make no sense.
   void Check() const;

@@ -344,6 +344,42 @@ TEST(GeneratorTest, SupersamplingMakesAFineFarTextureAgreeBetweenViews) {
   EXPECT_LT(box, 0.25 * point);  // the pixel means agree
 }
 
+// Glossy coats add a highlight and nothing else: depths and cameras stay,
+// every pixel is at least as bright (photometry that applies nothing), some
+// brighter, and where it is brighter differs between views (the highlight
+// moves with the viewpoint). The materials' own random stream leaves every
+// other draw as it was.
+TEST(GeneratorTest, SpecularSurfacesAddViewDependentHighlightsOnly) {
+  int glossy_scenes = 0;
+  for (uint64_t seed : {5u, 6u, 7u}) {
+    SynthConfig matte = SmallConfig(), glossy = SmallConfig();
+    matte.num_views = glossy.num_views = 2;
+    glossy.specular_probability = 1;
+    SynthScene a = DrawScene(matte, seed), b = DrawScene(glossy, seed);
+    for (auto* scene : {&a, &b}) {
+      for (ViewPhotometry& p : scene->photometry) p = ViewPhotometry{};
+    }
+    for (const Primitive& p : b.scene.primitives) {
+      EXPECT_GE(p.specular, 0.15);
+      EXPECT_LE(p.specular, 0.6);
+      EXPECT_GE(p.shininess, 8);
+      EXPECT_LE(p.shininess, 256);
+    }
+    const SynthSample plain = RenderSample(a, matte, torch::kCPU), shiny = RenderSample(b, glossy, torch::kCPU);
+    EXPECT_TRUE(torch::equal(plain.depths, shiny.depths));
+    EXPECT_TRUE(torch::equal(plain.world_to_camera, shiny.world_to_camera));
+    EXPECT_GE((shiny.images - plain.images).min().item<double>(), 0.0);
+    const torch::Tensor brighter = (shiny.images - plain.images).amax(1) > 0.05;  // [V,H,W]
+    if (brighter.any().item<bool>()) ++glossy_scenes;
+    // The highlight's share of the pixels is not the same in both views.
+    EXPECT_NE(brighter[0].sum().item<int64_t>(), brighter[1].sum().item<int64_t>()) << "seed " << seed;
+  }
+  EXPECT_GE(glossy_scenes, 2);
+  SynthConfig bad = SmallConfig();
+  bad.specular_probability = 1.5;
+  EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
 TEST(GeneratorTest, RobustDepthRangeIsNearestRankQuantile) {
   // Values 1..101 (and zeros, which are ignored): the 2nd percentile is the
   // value at rank round(0.02 * 100) = 2, i.e. 3; the 98th at rank 98, i.e. 99.

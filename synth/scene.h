@@ -47,6 +47,12 @@ struct Primitive {
   Vec3 half_size{1, 1, 1};
   bool inside = false;
   int texture = 0;       // index into Scene::textures
+  // A glossy coat (shading.h, ShadeSpecular): a white Blinn-Phong highlight
+  // of strength `specular` (0 = matte, the default) and exponent
+  // `shininess`, added to the Lambertian radiance. It moves with the
+  // viewpoint: what a matcher that assumes constant brightness gets wrong.
+  double specular = 0;
+  double shininess = 32;
   double uv_unit = 1.0;  // length of one UV unit
   // Height field only.
   std::vector<HeightBump> bumps;

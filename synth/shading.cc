@@ -76,6 +76,21 @@ torch::Tensor ShadeLambertian(const torch::Tensor& albedo, const torch::Tensor& 
   return albedo * (ambient + (1.0 - ambient) * cosine).unsqueeze(0);
 }
 
+torch::Tensor ShadeSpecular(const torch::Tensor& normal, const torch::Tensor& view, const Vec3& light,
+                            const torch::Tensor& specular, const torch::Tensor& shininess) {
+  if (normal.dim() != 3 || normal.size(2) != 3 || view.sizes() != normal.sizes() || specular.dim() != 2 ||
+      specular.size(0) != normal.size(0) || specular.size(1) != normal.size(1) ||
+      shininess.sizes() != specular.sizes()) {
+    throw std::invalid_argument("ShadeSpecular: expected normal and view [H,W,3], specular and shininess [H,W]");
+  }
+  const torch::Tensor l = torch::tensor({light.x, light.y, light.z}, torch::kDouble).to(normal.options());
+  const torch::Tensor half = view + l;  // [H,W,3], unit after the division below
+  const torch::Tensor half_unit = half / torch::clamp_min(half.norm(2, 2, true), 1e-12);
+  const torch::Tensor n_dot_h = torch::clamp_min((normal * half_unit).sum(2), 0);
+  const torch::Tensor lit = (normal * l).sum(2) > 0;
+  return torch::where(lit, specular * torch::pow(n_dot_h, shininess), torch::zeros_like(specular));
+}
+
 torch::Tensor ApplyPhotometry(const torch::Tensor& radiance, const ViewPhotometry& photometry) {
   photometry.Check();
   if (radiance.dim() != 3 || radiance.size(0) != 3) throw std::invalid_argument("ApplyPhotometry: expected [3,H,W]");

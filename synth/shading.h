@@ -2,8 +2,9 @@
 // Turning albedo and geometry into the image one camera records.
 //
 // Radiance is Lambertian under one directional light per scene plus an
-// ambient term, so it is the same from every viewpoint; what changes per
-// view is the camera (ViewPhotometry): exposure gain and white balance,
+// ambient term, so it is the same from every viewpoint, except on glossy
+// primitives (Primitive::specular), whose highlight moves with the
+// viewpoint; what also changes per view is the camera (ViewPhotometry): exposure gain and white balance,
 // optical blur, sensor noise and the tone curve (gamma). Those differences
 // are what a learned matcher must see through; identical pixel values across
 // views would let it cheat.
@@ -63,6 +64,15 @@ ViewPhotometry RandomPhotometry(const PhotometryRanges& ranges, Rng& rng);
 // surface (such pixels get albedo x ambient); light: unit vector towards it.
 torch::Tensor ShadeLambertian(const torch::Tensor& albedo, const torch::Tensor& normal,
                               const Vec3& light, double ambient);
+
+// The Blinn-Phong highlight [H,W]: specular * max(0, n . h)^shininess where
+// n . l > 0 (0 elsewhere), h = (l + v) / |l + v|. normal, view [H,W,3]: unit
+// world normals and unit vectors from the surface towards the camera (0
+// where there is no surface: no highlight); specular, shininess [H,W] per
+// pixel; light: unit vector towards it. The same white highlight is added to
+// every channel (a dielectric coat reflects the light's colour).
+torch::Tensor ShadeSpecular(const torch::Tensor& normal, const torch::Tensor& view, const Vec3& light,
+                            const torch::Tensor& specular, const torch::Tensor& shininess);
 
 // The recorded image [3,H,W] in [0, 1] for radiance [3,H,W].
 torch::Tensor ApplyPhotometry(const torch::Tensor& radiance, const ViewPhotometry& photometry);

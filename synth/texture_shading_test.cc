@@ -206,6 +206,27 @@ TEST(ShadingTest, LambertianByHand) {
   EXPECT_THROW(ShadeLambertian(albedo, normal.view({4, 1, 3}), light, 0.3), std::invalid_argument);
 }
 
+// Blinn-Phong by hand: light and view both along the normal (the half
+// vector is the normal: the full strength); the view 60 degrees off (the
+// half vector 30 degrees off: cos(30)^s); the light behind the surface
+// (nothing); no surface (nothing).
+TEST(ShadingTest, SpecularByHand) {
+  const Vec3 light{0, 0, 1};
+  const double c60 = 0.5, s60 = std::sqrt(0.75);
+  const torch::Tensor normal =
+      torch::tensor({0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0}, torch::kDouble).view({1, 4, 3});
+  const torch::Tensor view =
+      torch::tensor({0.0, 0.0, 1.0, s60, 0.0, c60, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0}, torch::kDouble).view({1, 4, 3});
+  const torch::Tensor specular = torch::full({1, 4}, 0.4, torch::kDouble);
+  const torch::Tensor shininess = torch::full({1, 4}, 20.0, torch::kDouble);
+  const torch::Tensor highlight = ShadeSpecular(normal, view, light, specular, shininess);
+  EXPECT_NEAR(highlight[0][0].item<double>(), 0.4, 1e-12);
+  EXPECT_NEAR(highlight[0][1].item<double>(), 0.4 * std::pow(std::cos(M_PI / 6), 20.0), 1e-12);
+  EXPECT_EQ(highlight[0][2].item<double>(), 0.0);
+  EXPECT_EQ(highlight[0][3].item<double>(), 0.0);
+  EXPECT_THROW(ShadeSpecular(normal, view.view({4, 1, 3}), light, specular, shininess), std::invalid_argument);
+}
+
 TEST(ShadingTest, GainWhiteBalanceGammaByHand) {
   const torch::Tensor radiance = torch::rand({3, 5, 6}, torch::kDouble);
   ViewPhotometry p;

@@ -140,6 +140,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "source_counts") return "";
   if (key == "photometry") return "default";
   if (key == "supersampling") return "1";
+  if (key == "specular_probability") return std::to_string(0.0);
   return std::nullopt;
 }
 
@@ -236,7 +237,8 @@ Settings RunSettings(const TrainOptions& o) {
           {"difficulty_ramp_steps", std::to_string(o.difficulty_ramp_steps)},
           {"source_counts", JoinCounts(o.source_counts)},
           {"photometry", o.photometry},
-          {"supersampling", std::to_string(o.supersampling)}};
+          {"supersampling", std::to_string(o.supersampling)},
+          {"specular_probability", std::to_string(o.specular_probability)}};
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,

@@ -122,6 +122,9 @@ void TrainOptions::Check(bool for_training) const {
                                  {"val_supersampling", val_supersampling}}) {
     if (s < 1 || s > 7 || s % 2 == 0) fail(std::string(name) + " must be odd and in [1, 7], got " + std::to_string(s));
   }
+  if (!(specular_probability >= 0 && specular_probability <= 1)) {
+    fail("specular_probability must be in [0, 1], got " + std::to_string(specular_probability));
+  }
   if (photometry != "default" && photometry != "wide" && photometry != "mixed") {
     fail("photometry must be default, wide or mixed, got '" + photometry + "'");
   }

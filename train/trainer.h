@@ -120,6 +120,10 @@ struct TrainOptions {
   // The same for the validation scenes (and EvaluateWeights' table). 1 keeps
   // the table comparable with earlier runs (point-sampled images).
   int64_t val_supersampling = 1;
+  // Share of glossy primitives in the generated training scenes
+  // (synth::SynthConfig::specular_probability): highlights that move with
+  // the viewpoint. Validation keeps matte scenes.
+  double specular_probability = 0;
   // GRU iterations of the coarse stage in training steps (0 = the config's):
   // cheaper steps; validation and the saved weights keep the config's.
   int64_t train_coarse_iterations = 0;

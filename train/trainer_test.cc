@@ -415,6 +415,20 @@ TEST(TrainerV2Test, WidePhotometryChangesTrainingImagesOnly) {
   EXPECT_THROW(Train(wide, again), std::runtime_error);
 }
 
+// The first step's training samples of `o` and of `other`, which differ
+// only in what the generator renders: the geometry must be the same.
+std::pair<std::vector<synth::SynthSample>, std::vector<synth::SynthSample>> FirstStepsWithSameGeometry(
+    const TrainOptions& o, const TrainOptions& other, internal::Logger& log) {
+  internal::TrainingSamples a(o, torch::kCPU, log), b(other, torch::kCPU, log);
+  auto pair = std::make_pair(a.ForStep(0), b.ForStep(0));
+  EXPECT_EQ(pair.first.size(), pair.second.size());
+  for (size_t i = 0; i < std::min(pair.first.size(), pair.second.size()); ++i) {
+    EXPECT_TRUE(torch::equal(pair.first[i].depths, pair.second[i].depths));
+    EXPECT_TRUE(torch::equal(pair.first[i].world_to_camera, pair.second[i].world_to_camera));
+  }
+  return pair;
+}
+
 // --supersampling renders the training scenes' colours from 3 x 3 rays per
 // pixel: same geometry, other images, a run setting; the validation scenes
 // follow --val_supersampling alone.
@@ -426,15 +440,8 @@ TEST(TrainerV2Test, SupersamplingChangesTrainingImagesOnlyAndValidationFollowsIt
   internal::Logger log(console, tmp.path() / "log.txt");
   TrainOptions fine = o;
   fine.supersampling = 3;
-  internal::TrainingSamples plain_samples(o, torch::kCPU, log);
-  internal::TrainingSamples fine_samples(fine, torch::kCPU, log);
-  const auto plain = plain_samples.ForStep(0), sharp = fine_samples.ForStep(0);
-  ASSERT_EQ(plain.size(), sharp.size());
-  for (size_t i = 0; i < plain.size(); ++i) {
-    EXPECT_TRUE(torch::equal(plain[i].depths, sharp[i].depths));
-    EXPECT_TRUE(torch::equal(plain[i].world_to_camera, sharp[i].world_to_camera));
-    EXPECT_FALSE(torch::equal(plain[i].images, sharp[i].images));
-  }
+  const auto [plain, sharp] = FirstStepsWithSameGeometry(o, fine, log);
+  for (size_t i = 0; i < plain.size(); ++i) EXPECT_FALSE(torch::equal(plain[i].images, sharp[i].images));
   EXPECT_NE(console.str().find("supersampling: 3 x 3 rays per pixel"), std::string::npos);
 
   // Validation: the same scenes whatever the training's supersampling.
@@ -457,6 +464,24 @@ TEST(TrainerV2Test, SupersamplingChangesTrainingImagesOnlyAndValidationFollowsIt
   fine.supersampling = 1;  // resuming with other training images is refused
   std::ostringstream again;
   EXPECT_THROW(Train(fine, again), std::runtime_error);
+}
+
+// --specular_probability gives the training scenes glossy surfaces: same
+// geometry, other images, said in the log; the validation scenes stay matte.
+TEST(TrainerV2Test, GlossySurfacesChangeTrainingImagesOnly) {
+  TempDir tmp;
+  TrainOptions o = TinyV2Options(tmp.path() / "gloss", 2);
+  std::ostringstream console;
+  internal::Logger log(console, tmp.path() / "log.txt");
+  TrainOptions glossy = o;
+  glossy.specular_probability = 1;
+  const auto [plain, shiny] = FirstStepsWithSameGeometry(o, glossy, log);
+  bool any_brighter = false;
+  for (size_t i = 0; i < plain.size(); ++i) any_brighter = any_brighter || !torch::equal(plain[i].images, shiny[i].images);
+  EXPECT_TRUE(any_brighter);
+  EXPECT_NE(console.str().find("glossy surfaces: 1.0"), std::string::npos) << console.str();
+  const auto val_plain = internal::ValidationScenes(o, torch::kCPU), val_glossy = internal::ValidationScenes(glossy, torch::kCPU);
+  for (size_t i = 0; i < val_plain.size(); ++i) EXPECT_TRUE(torch::equal(val_plain[i].images, val_glossy[i].images));
 }
 
 TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnce) {
@@ -670,6 +695,9 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o = good;
   o.photometry = "vivid";
   ExpectRejected(o, "photometry");
+  o = good;
+  o.specular_probability = -0.1;
+  ExpectRejected(o, "specular_probability");
   o = good;
   o.supersampling = 2;
   ExpectRejected(o, "supersampling");

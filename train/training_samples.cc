@@ -144,6 +144,11 @@ TrainingSamples::TrainingSamples(const TrainOptions& options, torch::Device devi
   // Training scenes only (TrainingSample): validation and the confidence
   // fit keep SynthConfigFor's defaults.
   synth_config_.supersampling = static_cast<int>(options.supersampling);
+  synth_config_.specular_probability = options.specular_probability;
+  if (options.specular_probability > 0) {
+    log.Line("glossy surfaces: " + std::to_string(options.specular_probability) +
+             " of the primitives in the generated training scenes");
+  }
   if (options.supersampling > 1) {
     log.Line("supersampling: " + std::to_string(options.supersampling) + " x " + std::to_string(options.supersampling) +
              " rays per pixel in the generated training scenes");
