@@ -194,12 +194,12 @@ struct TypeSums {
 // Scores every map of one image with GT, adding to report->types and `sums`;
 // back-projects the GT into `gt_cloud` when given; writes the PNGs when
 // options.png_dir is set.
-void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::SparseModel& model,
-                   const fs::path& gt_dir, const colmap_io::Image& image,
-                   const WorkspaceEvalOptions& options, const RegionLabels* region_labels,
-                   std::vector<TypeSums>* sums, PointCloud* gt_cloud, WorkspaceEvalReport* report) {
+// The GT depth map of `image` (GT_DIR/NAME.bin), checked to be its camera's
+// size or a clean down-scale of it.
+colmap_io::DenseArray ReadGroundTruthMap(const colmap_io::SparseModel& model, const fs::path& gt_dir,
+                                         const colmap_io::Image& image) {
   const fs::path gt_path = gt_dir / (image.name + ".bin");
-  const colmap_io::DenseArray gt = ReadDepthMap(gt_path, "ground-truth depth map");
+  colmap_io::DenseArray gt = ReadDepthMap(gt_path, "ground-truth depth map");
   const colmap_io::Camera& camera = model.cameras.at(image.camera_id);
   if (camera.width > colmap_io::kMaxDenseArraySide ||
       camera.height > colmap_io::kMaxDenseArraySide ||
@@ -210,6 +210,17 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
                                         " but its camera is " +
                                         SizeText(camera.width, camera.height));
   }
+  return gt;
+}
+
+// Scores every type's map of `image` against `gt`, its GT depth map
+// (ReadGroundTruthMap).
+void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::SparseModel& model,
+                   const fs::path& gt_dir, const colmap_io::Image& image, const colmap_io::DenseArray& gt,
+                   const WorkspaceEvalOptions& options, const RegionLabels* region_labels,
+                   std::vector<TypeSums>* sums, PointCloud* gt_cloud, WorkspaceEvalReport* report) {
+  const fs::path gt_path = gt_dir / (image.name + ".bin");
+  const colmap_io::Camera& camera = model.cameras.at(image.camera_id);
   std::optional<DisparityGeometry> disparity_geometry;
   if (std::optional<RectifiedPartner> partner = FindRectifiedPartner(model, image.image_id)) {
     // Disparity in pixels of the GT's resolution, whatever the map's.
@@ -296,20 +307,11 @@ void EvaluateImage(const colmap_io::Workspace& workspace, const colmap_io::Spars
 }
 
 // Every GT map of `gt.with_gt`, in its order (for the region labels, which
-// read all the other views' ground truth).
+// read all the other views' ground truth; the metrics then use these too).
 std::vector<colmap_io::DenseArray> ReadAllGroundTruth(const colmap_io::SparseModel& model,
                                                      const GroundTruthImages& gt) {
   std::vector<colmap_io::DenseArray> maps;
-  for (const colmap_io::Image* image : gt.with_gt) {
-    const fs::path path = gt.dir / (image->name + ".bin");
-    maps.push_back(ReadDepthMap(path, "ground-truth depth map"));
-    const colmap_io::Camera& camera = model.cameras.at(image->camera_id);
-    if (!IsCleanScale(maps.back().width(), maps.back().height(), static_cast<int>(camera.width),
-                      static_cast<int>(camera.height))) {
-      throw IoError(path.string(), "ground-truth depth map is " + SizeText(maps.back().width(), maps.back().height()) +
-                                       " but its camera is " + SizeText(camera.width, camera.height));
-    }
-  }
+  for (const colmap_io::Image* image : gt.with_gt) maps.push_back(ReadGroundTruthMap(model, gt.dir, *image));
   return maps;
 }
 
@@ -397,9 +399,13 @@ WorkspaceEvalReport EvaluateWorkspace(const fs::path& workspace_path,
                                                                          std::vector<colmap_io::DenseArray>{};
   for (std::size_t i = 0; i < gt.with_gt.size(); ++i) {
     const colmap_io::Image* image = gt.with_gt[i];
+    // Each GT map read once: with regions all are in memory already.
+    std::optional<colmap_io::DenseArray> read_now;
+    const colmap_io::DenseArray& gt_map =
+        options.regions ? gt_maps[i] : read_now.emplace(ReadGroundTruthMap(model, gt.dir, *image));
     std::optional<RegionLabels> labels;
     if (options.regions) labels = LabelRegionsOfView(model, gt, gt_maps, i);
-    EvaluateImage(workspace, model, gt.dir, *image, options, labels ? &*labels : nullptr, &sums,
+    EvaluateImage(workspace, model, gt.dir, *image, gt_map, options, labels ? &*labels : nullptr, &sums,
                   gt_cloud_from_maps ? &gt_cloud : nullptr, &report);
   }
   for (std::size_t t = 0; t < report.types.size(); ++t) {

@@ -90,24 +90,10 @@ PrimitiveTables MakePrimitiveTables(const SynthScene& s, const torch::TensorOpti
   return tables;
 }
 
-// Unit world vectors [H,W,3] from what each pixel of `camera` sees towards
-// the camera: minus its ray's direction.
-torch::Tensor TowardsCamera(const PinholeCamera& camera, int64_t height, int64_t width,
-                            const torch::TensorOptions& real) {
-  const torch::Tensor x = (torch::arange(width, real).view({1, width}).expand({height, width}) - camera.cx) / camera.fx;
-  const torch::Tensor y = (torch::arange(height, real).view({height, 1}).expand({height, width}) - camera.cy) / camera.fy;
-  const torch::Tensor ray_camera = torch::stack({x, y, torch::ones_like(x)}, 2);
-  const Mat3& r = camera.rotation;
-  const torch::Tensor rotation = torch::tensor({r.m[0], r.m[1], r.m[2], r.m[3], r.m[4], r.m[5], r.m[6], r.m[7], r.m[8]},
-                                               torch::kDouble).to(real).view({3, 3});
-  const torch::Tensor ray_world = torch::matmul(ray_camera, rotation);  // row vector times R = (R^T d)^T
-  return -ray_world / ray_world.norm(2, 2, true);
-}
-
-// Radiance [3,H,W] of the hits [H,W] of one view by `camera`: Lambertian,
-// plus the glossy primitives' highlights.
-torch::Tensor ShadeHits(const SynthScene& s, const SynthConfig& config, const PinholeCamera& camera,
-                        const RayHits& hits, const PrimitiveTables& tables) {
+// Radiance [3,H,W] of the hits [H,W] of one view: Lambertian, plus the
+// glossy primitives' highlights.
+torch::Tensor ShadeHits(const SynthScene& s, const SynthConfig& config, const RayHits& hits,
+                        const PrimitiveTables& tables) {
   const int64_t height = hits.depth.size(0), width = hits.depth.size(1);
   const torch::Tensor flat_primitive = hits.primitive.reshape({-1});
   const torch::Tensor entry = torch::where(flat_primitive >= 0, flat_primitive, tables.texture.size(0) - 1);
@@ -120,7 +106,7 @@ torch::Tensor ShadeHits(const SynthScene& s, const SynthConfig& config, const Pi
   if (tables.specular.defined()) {
     const torch::Tensor specular = tables.specular.index_select(0, entry).view({height, width});
     const torch::Tensor shininess = tables.shininess.index_select(0, entry).view({height, width});
-    const torch::Tensor view = TowardsCamera(camera, height, width, hits.normal.options());
+    const torch::Tensor view = -hits.direction / hits.direction.norm(2, 2, true);  // towards the camera
     radiance = radiance + ShadeSpecular(hits.normal, view, s.scene.light_direction, specular, shininess).unsqueeze(0);
   }
   return radiance;
@@ -237,7 +223,7 @@ SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::
     // s^2 - 1 other offsets is one more image-sized cast by a camera whose
     // principal point moves the other way, rather than one cast of an image
     // s times larger: the same rays, in tensors that stay small.
-    torch::Tensor radiance = ShadeHits(s, config, cam, hits, tables);
+    torch::Tensor radiance = ShadeHits(s, config, hits, tables);
     const int n = config.supersampling;
     for (int a = 0; a < n; ++a) {
       for (int b = 0; b < n; ++b) {
@@ -245,8 +231,7 @@ SynthSample RenderSample(const SynthScene& s, const SynthConfig& config, torch::
         PinholeCamera offset = cam;
         offset.cx = cam.cx - (b - 0.5 * (n - 1)) / n;
         offset.cy = cam.cy - (a - 0.5 * (n - 1)) / n;
-        radiance += ShadeHits(s, config, offset, CastImage(s.scene, offset, config.height, config.width, options),
-                              tables);
+        radiance += ShadeHits(s, config, CastImage(s.scene, offset, config.height, config.width, options), tables);
       }
     }
     if (n > 1) radiance /= static_cast<double>(n * n);

@@ -347,6 +347,7 @@ RayHits Finish(const Scene& scene, const PinholeCamera& camera, const torch::Ten
   hits.uv = torch::zeros({n, 2}, t.options());
   hits.normal = torch::zeros({n, 3}, t.options());
   const torch::Tensor dir_world = torch::matmul(dir_cam, ToTensor(camera.rotation, t.options()));
+  hits.direction = dir_world;
   for (size_t i = 0; i < scene.primitives.size(); ++i) {
     const torch::Tensor index = torch::nonzero(primitive == static_cast<int64_t>(i)).squeeze(1);
     if (index.numel() == 0) continue;
@@ -395,11 +396,11 @@ void CheckInputs(const Scene& scene, const PinholeCamera& camera, const RaycastO
 }
 
 RayHits Reshape(RayHits hits, const std::vector<int64_t>& shape) {
-  std::vector<int64_t> uv_shape = shape, normal_shape = shape;
+  std::vector<int64_t> uv_shape = shape, vector_shape = shape;
   uv_shape.push_back(2);
-  normal_shape.push_back(3);
+  vector_shape.push_back(3);
   return {hits.depth.reshape(shape), hits.primitive.reshape(shape), hits.uv.reshape(uv_shape),
-          hits.normal.reshape(normal_shape)};
+          hits.normal.reshape(vector_shape), hits.direction.reshape(vector_shape)};
 }
 
 }  // namespace

@@ -44,6 +44,9 @@ struct RayHits {
   torch::Tensor primitive;  // [...] int64: index into Scene::primitives; -1 where nothing is hit
   torch::Tensor uv;         // [...,2]: surface UV of the hit (0 where nothing is hit)
   torch::Tensor normal;     // [...,3]: unit world normal, turned towards the camera (0 where nothing is hit)
+  // [...,3]: world direction of the ray (its camera-frame z is 1; not unit),
+  // for every ray, hit or not: what view-dependent shading looks along.
+  torch::Tensor direction;
 };
 
 // Every pixel of a height x width image: results have leading shape [H,W].

@@ -185,6 +185,17 @@ TEST(RaycastTest, DoubleMatchesIndependentReferenceExactly) {
   }
   // The scene is arranged so that every primitive is visible.
   for (size_t k = 0; k < seen.size(); ++k) EXPECT_GT(seen[k], 0) << "primitive " << k << " not visible";
+  // Each ray's world direction, seen from the camera, has z = 1 and points
+  // through its own pixel: centre + direction projects to (col, row).
+  ASSERT_EQ(hits.direction.sizes(), (std::vector<int64_t>{height, width, 3}));
+  for (const auto& [row, col] : {std::pair<int64_t, int64_t>{0, 0}, {17, 40}, {47, 63}}) {
+    const Vec3 d{hits.direction[row][col][0].item<double>(), hits.direction[row][col][1].item<double>(),
+                 hits.direction[row][col][2].item<double>()};
+    const Vec3 in_camera = cam.ToCamera(cam.Center() + d);
+    EXPECT_NEAR(in_camera.z, 1.0, 1e-12);
+    EXPECT_NEAR(cam.fx * in_camera.x / in_camera.z + cam.cx, static_cast<double>(col), 1e-9);
+    EXPECT_NEAR(cam.fy * in_camera.y / in_camera.z + cam.cy, static_cast<double>(row), 1e-9);
+  }
 }
 
 TEST(RaycastTest, FloatDepthWithin1e5OfReference) {
