@@ -18,7 +18,9 @@
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 
+#include "synth/jpeg.h"
 #include "synth/photo_folder.h"
 #include "synth/shading.h"
 #include "synth/workspace_writer.h"
@@ -40,6 +42,7 @@ struct Options {
   std::string rig = "random";
   std::string texture_dir;
   std::string photometry = "default";
+  std::string jpeg_quality;
   dispmvs::synth::SynthWorkspaceOptions workspace;
 };
 
@@ -88,6 +91,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "Per-view camera response: default, or wide (exposure 0.5-2x, white balance +-15 %, gamma "
        "0.7-1.4 and vignetting up to 0.4 between views, as between real photographs; "
        "dispmvs_train --photometry wide).")
+      ("jpeg_quality", po::value<std::string>(&options.jpeg_quality),
+       "Save every view as a JPEG of this quality would be, Q or MIN,MAX (1-100, drawn per view): "
+       "8-bit samples, 4:2:0 chroma and 8 x 8 block artefacts that differ between views, as in "
+       "photographs. The images are still written as PNG. Default: no compression.")
       ("ply_stride", po::value<int>(&options.workspace.ply_stride)->default_value(options.workspace.ply_stride),
        "ground_truth/points.ply keeps every n-th depth sample per row and column.");
 
@@ -101,6 +108,8 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   } else if (options.photometry != "default") {
     throw std::invalid_argument("--photometry must be default or wide, got '" + options.photometry + "'");
   }
+  std::tie(config.photometry.jpeg_quality_min, config.photometry.jpeg_quality_max) =
+      dispmvs::synth::ParseJpegQualityRange(options.jpeg_quality);
   config = dispmvs::synth::ConfigForRig(options.rig, config);
   if (!options.texture_dir.empty()) {
     config.photos = std::make_shared<const dispmvs::synth::PhotoSet>(

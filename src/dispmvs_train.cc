@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "src/program_main.h"
+#include "synth/jpeg.h"
 #include "train/confidence_fit.h"
 #include "train/error_breakdown.h"
 #include "train/source_pixel_metrics.h"
@@ -133,6 +134,9 @@ options (default):
                               (odd, 1-7): each pixel the mean of S x S rays, as a camera
                               integrates light, instead of one ray that aliases textures finer
                               than a pixel; rendering costs about S^2 as much (1)
+  --jpeg_quality Q|MIN,MAX    training: each view of the generated scenes compressed as a JPEG
+                              of this quality (1-100, drawn per view): 8-bit samples, 4:2:0
+                              chroma, 8 x 8 block artefacts, as photographs; 0 = none (0)
   --batch B                   samples per step (1)
   --steps S                   total steps (1000)
   --lr LR                     Adam learning rate (2e-4)
@@ -313,6 +317,11 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--supersampling") o.supersampling = ParseInt(flag, value);
     else if (flag == "--specular_probability") o.specular_probability = ParseDouble(flag, value);
     else if (flag == "--val_supersampling") o.val_supersampling = ParseInt(flag, value);
+    else if (flag == "--jpeg_quality") {
+      const auto [low, high] = dispmvs::synth::ParseJpegQualityRange(value);
+      o.jpeg_quality_min = low;
+      o.jpeg_quality_max = high;
+    }
     else if (flag == "--batch") o.batch_size = ParseInt(flag, value);
     else if (flag == "--steps") o.steps = ParseInt(flag, value);
     else if (flag == "--lr") o.lr = ParseDouble(flag, value);

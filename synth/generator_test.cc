@@ -7,11 +7,13 @@
 
 #include <Eigen/Dense>
 #include <memory>
+#include <set>
 #include <string>
 #include <tuple>
 
 #include <torch/cuda.h>
 
+#include "synth/jpeg.h"
 #include "synth/raycast.h"
 
 namespace dispmvs::synth {
@@ -378,6 +380,48 @@ TEST(GeneratorTest, SpecularSurfacesAddViewDependentHighlightsOnly) {
   SynthConfig bad = SmallConfig();
   bad.specular_probability = 1.5;
   EXPECT_THROW(bad.Check(), std::invalid_argument);
+}
+
+// JPEG compression per view: the geometry and every other draw stay (all
+// views' photometry: the qualities come from a stream of their own), each
+// image is the uncompressed one through that view's JPEG round trip (a
+// quality in the range per view), and lower difficulty compresses less.
+TEST(GeneratorTest, JpegQualityCompressesEachViewOnItsOwn) {
+  SynthConfig plain = SmallConfig(), jpeg = SmallConfig();
+  jpeg.photometry.jpeg_quality_min = 40;
+  jpeg.photometry.jpeg_quality_max = 90;
+  const SynthScene a = DrawScene(plain, 9), b = DrawScene(jpeg, 9);
+  ASSERT_EQ(a.photometry.size(), b.photometry.size());
+  std::set<int> qualities;
+  for (size_t v = 0; v < a.photometry.size(); ++v) {
+    EXPECT_EQ(a.photometry[v].jpeg_quality, 0);
+    EXPECT_GE(b.photometry[v].jpeg_quality, 40);
+    EXPECT_LE(b.photometry[v].jpeg_quality, 90);
+    qualities.insert(b.photometry[v].jpeg_quality);
+    EXPECT_EQ(a.photometry[v].gain, b.photometry[v].gain);
+    EXPECT_EQ(a.photometry[v].noise_seed, b.photometry[v].noise_seed);
+  }
+  EXPECT_GE(qualities.size(), 2u);
+  const SynthSample exact = RenderSample(a, plain, torch::kCPU), compressed = RenderSample(b, jpeg, torch::kCPU);
+  EXPECT_TRUE(torch::equal(exact.depths, compressed.depths));
+  EXPECT_TRUE(torch::equal(exact.world_to_camera, compressed.world_to_camera));
+  for (int64_t v = 0; v < exact.images.size(0); ++v) {
+    const torch::Tensor expected =
+        JpegRoundTrip(exact.images[v].to(torch::kDouble), b.photometry[static_cast<size_t>(v)].jpeg_quality);
+    // Levels k / 255 held in float32: equal to float precision.
+    const torch::Tensor off = (compressed.images[v].to(torch::kDouble) - expected).abs() * 255.0;
+    EXPECT_LT(off.max().item<double>(), 1e-4);
+    EXPECT_FALSE(torch::equal(compressed.images[v], exact.images[v]));
+  }
+  SynthConfig easier = jpeg;
+  easier.difficulty = 0.5;
+  for (const ViewPhotometry& p : DrawScene(easier, 9).photometry) EXPECT_GE(p.jpeg_quality, 70);  // 100 - 0.5 x 60
+  SynthConfig bad = SmallConfig();
+  for (const auto& [low, high] : {std::pair<int, int>{0, 80}, {90, 80}, {50, 101}}) {
+    bad.photometry.jpeg_quality_min = low;
+    bad.photometry.jpeg_quality_max = high;
+    EXPECT_THROW(bad.Check(), std::invalid_argument) << low << "," << high;
+  }
 }
 
 TEST(GeneratorTest, RobustDepthRangeIsNearestRankQuantile) {

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "synth/hash_noise.h"
+#include "synth/jpeg.h"
 #include "synth/rng.h"
 
 namespace dispmvs::synth {
@@ -36,7 +37,8 @@ torch::Tensor GaussianBlur(const torch::Tensor& image, double sigma) {
 void ViewPhotometry::Check() const {
   const bool ok = gain > 0 && gain < 100 && gamma > 0.1 && gamma < 10 && noise_sigma >= 0 &&
                   noise_sigma < 1 && blur_sigma >= 0 && blur_sigma <= 10 && white_balance[0] > 0 &&
-                  white_balance[1] > 0 && white_balance[2] > 0 && vignetting >= 0 && vignetting <= 0.9;
+                  white_balance[1] > 0 && white_balance[2] > 0 && vignetting >= 0 && vignetting <= 0.9 && jpeg_quality >= 0 &&
+                  jpeg_quality <= 100;
   if (!ok) throw std::invalid_argument("ViewPhotometry: value out of range");
 }
 
@@ -118,7 +120,9 @@ torch::Tensor ApplyPhotometry(const torch::Tensor& radiance, const ViewPhotometr
     x = x + photometry.noise_sigma * HashNormal((col + channel).expand({3, h, w}), row,
                                                 photometry.noise_seed, x.scalar_type());
   }
-  return torch::pow(torch::clamp(x, 0, 1), 1.0 / photometry.gamma);
+  x = torch::pow(torch::clamp(x, 0, 1), 1.0 / photometry.gamma);
+  if (photometry.jpeg_quality > 0) x = JpegRoundTrip(x, photometry.jpeg_quality);
+  return x;
 }
 
 }  // namespace dispmvs::synth

@@ -5,12 +5,13 @@
 // ambient term, so it is the same from every viewpoint, except on glossy
 // primitives (Primitive::specular), whose highlight moves with the
 // viewpoint; what also changes per view is the camera (ViewPhotometry): exposure gain and white balance,
-// optical blur, sensor noise and the tone curve (gamma). Those differences
+// optical blur, sensor noise, the tone curve (gamma) and, where a view has a
+// quality, JPEG compression (synth/jpeg.h). Those differences
 // are what a learned matcher must see through; identical pixel values across
 // views would let it cheat.
 // Order, as in a camera: blur (optics) -> gain (exposure) and vignetting
 // (the lens's radial fall-off) -> additive Gaussian noise (sensor) -> clamp
-// to [0, 1] -> gamma (tone curve).
+// to [0, 1] -> gamma (tone curve) -> JPEG file (8-bit, lossy).
 
 #include <torch/torch.h>
 
@@ -35,6 +36,10 @@ struct ViewPhotometry {
   // Real pairs see the same surface at different image radii, so its
   // brightness differs between views by up to this much. In [0, 0.9].
   double vignetting = 0.0;
+  // Quality (1-100) of the JPEG file the view is saved as, 0 = none (the
+  // image stays in floating point). Each view is compressed on its own, so
+  // two views of one surface carry different block artefacts.
+  int jpeg_quality = 0;
 
   void Check() const;  // throws std::invalid_argument on values outside sane ranges
 };
@@ -49,6 +54,11 @@ struct PhotometryRanges {
   // Drawn uniformly in [0, max] per view. 0 (the default) draws nothing, so
   // scenes are exactly those of a configuration without vignetting.
   double vignetting_max = 0.0;
+  // JPEG quality drawn uniformly (integers) in [min, max] per view, by
+  // DrawScene from a random stream of its own (RandomPhotometry leaves it 0),
+  // so that compressed scenes are the plain ones compressed; both 0 (the
+  // default) draw nothing and compress nothing.
+  int jpeg_quality_min = 0, jpeg_quality_max = 0;
 };
 
 // Wider per-view differences than the defaults, as between two photographs

@@ -7,6 +7,7 @@
 
 #include "synth/generator.h"
 #include "synth/hash_noise.h"
+#include "synth/jpeg.h"
 #include "synth/raycast.h"
 #include "synth/rng.h"
 #include "synth/shading.h"
@@ -346,6 +347,23 @@ TEST(ShadingTest, VignettingDrawLeavesTheOtherDraws) {
   EXPECT_NO_THROW(config.Check());
   config.photometry.vignetting_max = 1.0;
   EXPECT_THROW(config.Check(), std::invalid_argument);
+}
+
+// ApplyPhotometry compresses last, after the tone curve (the draw of the
+// quality is DrawScene's: GeneratorTest.JpegQualityCompressesEachViewOnItsOwn).
+TEST(ShadingTest, JpegIsAppliedLast) {
+  ViewPhotometry exact;
+  exact.gain = 1.2;
+  exact.gamma = 1.1;
+  exact.noise_sigma = 0.01;
+  ViewPhotometry compressed = exact;
+  compressed.jpeg_quality = 70;
+  const torch::Tensor radiance = torch::rand({3, 24, 40}, torch::kDouble);
+  EXPECT_TRUE(torch::equal(ApplyPhotometry(radiance, compressed), JpegRoundTrip(ApplyPhotometry(radiance, exact), 70)));
+  compressed.jpeg_quality = 101;
+  EXPECT_THROW(ApplyPhotometry(radiance, compressed), std::invalid_argument);
+  compressed.jpeg_quality = -1;
+  EXPECT_THROW(compressed.Check(), std::invalid_argument);
 }
 
 // 1 - |(t mod 2) - 1| in plain double arithmetic.

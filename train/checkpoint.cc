@@ -141,6 +141,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "photometry") return "default";
   if (key == "supersampling") return "1";
   if (key == "specular_probability") return std::to_string(0.0);
+  if (key == "jpeg_quality") return "";
   return std::nullopt;
 }
 
@@ -238,7 +239,9 @@ Settings RunSettings(const TrainOptions& o) {
           {"source_counts", JoinCounts(o.source_counts)},
           {"photometry", o.photometry},
           {"supersampling", std::to_string(o.supersampling)},
-          {"specular_probability", std::to_string(o.specular_probability)}};
+          {"specular_probability", std::to_string(o.specular_probability)},
+          {"jpeg_quality", o.jpeg_quality_max == 0 ? "" : std::to_string(o.jpeg_quality_min) + "," +
+                                                           std::to_string(o.jpeg_quality_max)}};
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,

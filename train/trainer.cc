@@ -125,6 +125,11 @@ void TrainOptions::Check(bool for_training) const {
   if (!(specular_probability >= 0 && specular_probability <= 1)) {
     fail("specular_probability must be in [0, 1], got " + std::to_string(specular_probability));
   }
+  if (!(jpeg_quality_min == 0 && jpeg_quality_max == 0) &&
+      !(jpeg_quality_min >= 1 && jpeg_quality_max >= jpeg_quality_min && jpeg_quality_max <= 100)) {
+    fail("jpeg_quality must be 1 <= min <= max <= 100 (or both 0: none), got " + std::to_string(jpeg_quality_min) +
+         "," + std::to_string(jpeg_quality_max));
+  }
   if (photometry != "default" && photometry != "wide" && photometry != "mixed") {
     fail("photometry must be default, wide or mixed, got '" + photometry + "'");
   }

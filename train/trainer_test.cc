@@ -484,6 +484,42 @@ TEST(TrainerV2Test, GlossySurfacesChangeTrainingImagesOnly) {
   for (size_t i = 0; i < val_plain.size(); ++i) EXPECT_TRUE(torch::equal(val_plain[i].images, val_glossy[i].images));
 }
 
+// --jpeg_quality compresses the training scenes' views (8-bit samples),
+// with the default and the wide photometry alike: same geometry, said in the
+// log, a run setting; the validation scenes stay uncompressed.
+TEST(TrainerV2Test, JpegCompressionChangesTrainingImagesOnly) {
+  TempDir tmp;
+  for (const std::string photometry : {"default", "wide"}) {
+    SCOPED_TRACE(photometry);
+    TrainOptions o = TinyV2Options(tmp.path() / ("jpeg_" + photometry), 2);
+    o.photometry = photometry;
+    fs::create_directories(o.checkpoint_dir);
+    std::ostringstream console;
+    internal::Logger log(console, tmp.path() / ("log_" + photometry + ".txt"));
+    TrainOptions jpeg = o;
+    jpeg.jpeg_quality_min = 30;
+    jpeg.jpeg_quality_max = 60;
+    const auto [plain, compressed] = FirstStepsWithSameGeometry(o, jpeg, log);
+    for (size_t i = 0; i < plain.size(); ++i) {
+      EXPECT_FALSE(torch::equal(plain[i].images, compressed[i].images));
+      const torch::Tensor levels = compressed[i].images.to(torch::kDouble) * 255.0;
+      EXPECT_LT((levels - torch::round(levels)).abs().max().item<double>(), 1e-3);
+    }
+    EXPECT_NE(console.str().find("JPEG compression: quality 30-60"), std::string::npos) << console.str();
+    const auto val_plain = internal::ValidationScenes(o, torch::kCPU);
+    const auto val_jpeg = internal::ValidationScenes(jpeg, torch::kCPU);
+    for (size_t i = 0; i < val_plain.size(); ++i) EXPECT_TRUE(torch::equal(val_plain[i].images, val_jpeg[i].images));
+  }
+  TrainOptions run = TinyV2Options(tmp.path() / "jpeg_run", 1);
+  run.jpeg_quality_min = run.jpeg_quality_max = 80;
+  std::ostringstream first;
+  Train(run, first);
+  run.steps = 2;
+  run.jpeg_quality_max = 90;  // resuming with other training images is refused
+  std::ostringstream again;
+  EXPECT_THROW(Train(run, again), std::runtime_error);
+}
+
 TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnce) {
   TempDir tmp;
   std::ostringstream log;
@@ -701,6 +737,12 @@ TEST(TrainerTest, BadOptionsAreRejectedByName) {
   o = good;
   o.supersampling = 2;
   ExpectRejected(o, "supersampling");
+  o = good;
+  o.jpeg_quality_min = 0;
+  o.jpeg_quality_max = 80;
+  ExpectRejected(o, "jpeg_quality");
+  o.jpeg_quality_min = 90;
+  ExpectRejected(o, "jpeg_quality");
   o = good;
   o.val_supersampling = 9;
   ExpectRejected(o, "val_supersampling must be odd");
