@@ -17,6 +17,11 @@
 #                              (the pixel-centre convention of the cameras: D =
 #                              0.5 turns "pixel centre at (0, 0)" into COLMAP's
 #                              "(0.5, 0.5)"; the ground truth stays as it is)
+#   --jpeg_quality Q           replace the copies' photographs by their JPEG
+#                              round trip at quality Q (libjpeg through
+#                              BUILD_DIR/bench/dispmvs_jpeg_recompress), each
+#                              view on its own, as photographs that reach a
+#                              workspace as JPEGs: what compression costs
 #
 # Writes OUT_DIR/PAIR/ (the workspace copy, its maps and eval.tsv) and
 # OUT_DIR/summary.tsv (pair, type, within_1, within_2, within_5 as shares of
@@ -25,7 +30,8 @@
 set -euo pipefail
 
 usage() {
-  echo "usage: $0 BUILD_DIR REALVAL_DIR OUT_DIR [--pairs GLOB] [--principal_point_shift D] [-- dispmvs_colmap options]" >&2
+  echo "usage: $0 BUILD_DIR REALVAL_DIR OUT_DIR [--pairs GLOB] [--principal_point_shift D] [--jpeg_quality Q]" \
+    "[-- dispmvs_colmap options]" >&2
   exit 2
 }
 [ $# -ge 3 ] || usage
@@ -38,10 +44,12 @@ out=$(cd "$3" && pwd)
 shift 3
 pairs_glob="*"
 shift_pp=""
+jpeg_quality=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --pairs) pairs_glob="$2"; shift 2 ;;
     --principal_point_shift) shift_pp="$2"; shift 2 ;;
+    --jpeg_quality) jpeg_quality="$2"; shift 2 ;;
     --) shift; break ;;
     *) usage ;;
   esac
@@ -67,6 +75,10 @@ for source in "$realval"/$pairs_glob/; do
         { print "error: camera model " $2 " in " FILENAME > "/dev/stderr"; exit 1 }
       ' "$ws/sparse/cameras.txt" > "$ws/sparse/cameras.txt.new"
       mv "$ws/sparse/cameras.txt.new" "$ws/sparse/cameras.txt"
+    fi
+    if [ -n "$jpeg_quality" ]; then
+      "$build/bench/dispmvs_jpeg_recompress" "$jpeg_quality" "$ws"/images/* ||
+        { echo "error: JPEG recompression failed on $pair" >&2; exit 1; }
     fi
     "$build/src/dispmvs_colmap" --workspace_path "$ws" --no_report "${colmap_options[@]}" \
       > "$ws/dispmvs_colmap.log" 2>&1 ||
