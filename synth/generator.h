@@ -4,9 +4,9 @@
 //
 // Pipeline: DrawScene picks everything random with scalar code on the CPU
 // (rig, cameras, objects, textures, glossy materials, light, per-view
-// photometry, metric scale); RenderSample then ray-casts and shades every
-// view on the requested device (with `supersampling`, several rays per
-// pixel). The scene is built and rendered at unit scale; the metric scale
+// photometry and JPEG quality, metric scale); RenderSample then ray-casts
+// and shades every view on the requested device (with `supersampling`,
+// several rays per pixel) and applies its photometry. The scene is built and rendered at unit scale; the metric scale
 // multiplies only the outputs that carry a length (depths, camera
 // translations, depth range). So a sample at scale 1e-3 and at 1e3 from the
 // same seed has identical images and depths that differ by exactly that
