@@ -11,8 +11,10 @@
 #      --minutes: the steps that fit, a learning-rate warm-up (the optimiser's
 #      moments start empty), 4 halvings of the rate over the run and 8 kept
 #      checkpoints; a rerun on the same machine resumes the checkpoint folder;
-#   4. trains from --init (the shipped weights), with scenes generated on the
-#      device;
+#   4. trains from --init (the shipped weights) with the shipped weights'
+#      objective (log-depth loss, flow loss 0.3, 1, 2 and N sources mixed;
+#      models/README.md, stage 28), scenes generated on the device, and any
+#      trainer options after `--` (e.g. -- --jpeg_quality 40,95);
 #   5. scores the kept checkpoints of the run's second half on the selection
 #      set (train/score_checkpoints.sh) and keeps the best;
 #   6. evaluates it and the starting weights on the 20 validation scenes
@@ -57,6 +59,10 @@ Options (default):
   --out DIR                results ($OUT, else out/gpu_train)
   --work DIR               checkpoints and converted photos (BUILD/gpu_train: kept
                            between device calls, like the build)
+  -- OPTIONS                the rest goes to dispmvs_train as it is (generator
+                           knobs such as --jpeg_quality, --specular_probability,
+                           --photometry); the objective's options come first, so
+                           a later --depth_loss or --source_counts here wins
   --build_only             configure and build, then stop
   --configure_only         configure the build folder, then stop (a check of the
                            LibTorch-only CMake flavour)
@@ -68,6 +74,7 @@ minutes=6 height=480 width=640 batch=8 sources=5 lr=1e-4 warmup=100 seed=""
 init="$root/models/dispmvs_small.safetensors" config=small_v2 device=cuda photos=""
 val_scenes=20 eval_height=512 eval_width=640 build="$root/build-gpu"
 out=${OUT:-$root/out/gpu_train} work="" build_only=0 configure_only=0
+extra_train_options=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --minutes) minutes=$2; shift 2 ;;
@@ -91,6 +98,7 @@ while [ $# -gt 0 ]; do
     --build_only) build_only=1; shift ;;
     --configure_only) configure_only=1; shift ;;
     -h|--help) usage; exit 0 ;;
+    --) shift; extra_train_options=("$@"); break ;;
     *) echo "error: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
 done
@@ -163,9 +171,17 @@ fi
 # rerun on the same machine reuses the schedule, so the checkpoint folder resumes.
 budget_start=$(date +%s)
 seconds_left() { awk -v m="$minutes" -v t0="$budget_start" -v now="$(date +%s)" 'BEGIN { print int(60 * m - (now - t0)) }'; }
+# The shipped weights' objective (stages 24-28): the L1 of log depth, the
+# flow loss at every fine iteration, and steps with 1, 2 and N sources mixed
+# (two-view workspaces are common). Without it a run would train them
+# towards the paper's inverse-depth loss instead.
+if (( sources >= 2 )); then source_counts="1,2,$sources,$sources"; else source_counts=1; fi
+objective=(--depth_loss log --source_counts "$source_counts")
+[[ "$config" != *_v2 ]] || objective+=(--flow_loss_weight 0.3)  # the paper's design has no flow loss
 common=(--config "$config" --device "$device" --height "$height" --width "$width" --sources "$sources"
         --batch "$batch" --lr "$lr" --train_widening_max 3 --seed "$seed" --scene_reuse 4
-        --validate_every 0 --init_weights "$init" "${photo_options[@]}")
+        --validate_every 0 --init_weights "$init" "${photo_options[@]}" "${objective[@]}"
+        "${extra_train_options[@]}")
 schedule=$work/schedule.env
 if [ -f "$schedule" ]; then
   source "$schedule"

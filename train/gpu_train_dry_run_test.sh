@@ -24,12 +24,18 @@ cp "$work/photos/ramp.ppm" "$work/photos/motorcycle_left.ppm"
 
 "$script" --device cpu --minutes 1 --height 64 --width 96 --batch 1 --val_scenes 1 \
   --eval_height 64 --eval_width 96 --photos "$work/photos" --build "$build" \
-  --out "$work/out" --work "$work/scratch" > "$work/run.out" 2>&1 || { cat "$work/run.out"; fail "the run"; }
+  --out "$work/out" --work "$work/scratch" -- --jpeg_quality 60,90 > "$work/run.out" 2>&1 ||
+  { cat "$work/run.out"; fail "the run"; }
 cat "$work/run.out"
 
 out=$work/out
 grep -q "1 photos from" "$work/run.out" || fail "photos: motorcycle_* not left out, or the ramp not used"
 grep -q -- "--texture_dir" "$out/train.log" "$out/summary.md" || fail "photos not passed to training"
+# The shipped weights' objective, and the options after -- on top of it.
+for option in "--depth_loss log" "--flow_loss_weight 0.3" "--source_counts 1,2,5,5" "--jpeg_quality 60,90"; do
+  grep -q -- "$option" "$out/summary.md" || fail "summary.md: training without $option"
+done
+grep -q "JPEG compression: quality 60-90" "$out/train.log" || fail "the option after -- did not reach the trainer"
 # The probe sized the run: the schedule line names the steps, and training
 # ran that schedule (its step lines count to the probed total, with the rate
 # halving every quarter) or stopped at the minutes left.
