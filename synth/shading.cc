@@ -37,8 +37,8 @@ torch::Tensor GaussianBlur(const torch::Tensor& image, double sigma) {
 void ViewPhotometry::Check() const {
   const bool ok = gain > 0 && gain < 100 && gamma > 0.1 && gamma < 10 && noise_sigma >= 0 &&
                   noise_sigma < 1 && blur_sigma >= 0 && blur_sigma <= 10 && white_balance[0] > 0 &&
-                  white_balance[1] > 0 && white_balance[2] > 0 && vignetting >= 0 && vignetting <= 0.9 && jpeg_quality >= 0 &&
-                  jpeg_quality <= 100;
+                  white_balance[1] > 0 && white_balance[2] > 0 && vignetting >= 0 && vignetting <= 0.9 &&
+                  jpeg_quality >= 0 && jpeg_quality <= 100;
   if (!ok) throw std::invalid_argument("ViewPhotometry: value out of range");
 }
 

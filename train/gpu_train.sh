@@ -59,7 +59,7 @@ Options (default):
   --out DIR                results ($OUT, else out/gpu_train)
   --work DIR               checkpoints and converted photos (BUILD/gpu_train: kept
                            between device calls, like the build)
-  -- OPTIONS                the rest goes to dispmvs_train as it is (generator
+  -- OPTIONS               the rest goes to dispmvs_train as it is (generator
                            knobs such as --jpeg_quality, --specular_probability,
                            --photometry); the objective's options come first, so
                            a later --depth_loss or --source_counts here wins
