@@ -55,7 +55,6 @@ TEST(JpegRecompressCliTest, ReplacesEachImageByItsJpegRoundTripInItsFormat) {
   EXPECT_EQ(cv::norm(colour_after, LibjpegRoundTrip(colour, 40), cv::NORM_INF), 0);
   EXPECT_EQ(cv::norm(grey_after, LibjpegRoundTrip(grey, 40), cv::NORM_INF), 0);
   EXPECT_GT(cv::norm(colour_after, colour, cv::NORM_L1) / colour.total(), 10.0);  // noise does not survive q40
-  EXPECT_EQ(ReadFileBytes(tmp.path() / "a.png").empty(), false);
 }
 
 TEST(JpegRecompressCliTest, RefusesBadInputAndLeavesFilesAlone) {
