@@ -6,7 +6,9 @@
 // costs on the real pairs. Errors print one line "error: <message>" on stderr
 // with exit status 1; a file is replaced only once its new bytes are written.
 //
-//   dispmvs_jpeg_recompress QUALITY FILE...
+//   dispmvs_jpeg_recompress --quality Q --images FILE...
+
+#include <boost/program_options.hpp>
 
 #include <filesystem>
 #include <iostream>
@@ -18,29 +20,16 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "src/program_main.h"
+#include "src/program_options.h"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-constexpr const char* kUsage =
-    "usage: dispmvs_jpeg_recompress QUALITY FILE...\n"
-    "Replaces each image file (any format OpenCV writes, by its extension) by its\n"
-    "JPEG round trip at QUALITY (1-100, libjpeg's scale), keeping name and format.\n";
-
-int ParseQuality(const std::string& text) {
-  size_t used = 0;
-  int quality = 0;
-  try {
-    quality = std::stoi(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used == 0 || used != text.size() || quality < 1 || quality > 100) {
-    throw std::invalid_argument("QUALITY must be an integer in [1, 100], got '" + text + "'");
-  }
-  return quality;
-}
+constexpr const char* kDescription =
+    "dispmvs_jpeg_recompress: replaces each image file (any format OpenCV writes, by its\n"
+    "extension) by its JPEG round trip at a quality, keeping name and format.\n"
+    "Usage: dispmvs_jpeg_recompress --quality Q --images FILE...\n\nOptions";
 
 void Recompress(const fs::path& path, int quality) {
   if (!fs::is_regular_file(path)) throw std::runtime_error("cannot read an image from " + path.string() + ": no such file");
@@ -68,15 +57,24 @@ void Recompress(const fs::path& path, int quality) {
 
 int main(int argc, char** argv) {
   return dispmvs::cli::RunProgram([&]() {
-    if (argc == 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h")) {
-      std::cout << kUsage;
-      return 0;
+    namespace po = boost::program_options;
+    int quality = 0;
+    std::vector<std::string> images;
+    po::options_description description(kDescription);
+    description.add_options()
+        ("help,h", "Print this help and exit.")
+        ("quality", po::value<int>(&quality), "JPEG quality, 1-100 (libjpeg's scale; required).")
+        ("images", po::value<std::vector<std::string>>(&images)->multitoken(),
+         "Image files to replace (required).");
+    po::variables_map values;
+    if (!dispmvs::cli::ParseCommandLine(argc, argv, description, &values)) return 0;
+    if (values.count("quality") == 0 || quality < 1 || quality > 100) {
+      throw std::invalid_argument("--quality must be given, in [1, 100] (see --help)");
     }
-    if (argc < 3) throw std::invalid_argument(std::string("expected QUALITY and at least one FILE\n") + kUsage);
-    const int quality = ParseQuality(argv[1]);
+    if (images.empty()) throw std::invalid_argument("--images must name at least one file (see --help)");
     // Failures are this program's one error line, not OpenCV's warnings.
     cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_SILENT);
-    for (int i = 2; i < argc; ++i) Recompress(argv[i], quality);
+    for (const std::string& image : images) Recompress(image, quality);
     return 0;
   });
 }

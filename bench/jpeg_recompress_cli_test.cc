@@ -45,7 +45,7 @@ TEST(JpegRecompressCliTest, ReplacesEachImageByItsJpegRoundTripInItsFormat) {
   const std::string colour_png = (tmp.path() / "a.png").string(), grey_png = (tmp.path() / "b.png").string();
   ASSERT_TRUE(cv::imwrite(colour_png, colour));
   ASSERT_TRUE(cv::imwrite(grey_png, grey));
-  const auto run = RunProgram(tmp, kProgram, "40 '" + colour_png + "' '" + grey_png + "'");
+  const auto run = RunProgram(tmp, kProgram, "--quality 40 --images '" + colour_png + "' '" + grey_png + "'");
   ASSERT_EQ(run.status, 0) << run.err;
   EXPECT_EQ(ReadFileBytes(colour_png).substr(1, 3), "PNG");  // still a PNG file
   const cv::Mat colour_after = cv::imread(colour_png, cv::IMREAD_UNCHANGED);
@@ -62,18 +62,18 @@ TEST(JpegRecompressCliTest, RefusesBadInputAndLeavesFilesAlone) {
   const std::string png = (tmp.path() / "a.png").string();
   ASSERT_TRUE(cv::imwrite(png, Card(CV_8UC3)));
   const std::string before = ReadFileBytes(png);
-  ExpectError(RunProgram(tmp, kProgram, "0 '" + png + "'"), "QUALITY must be an integer in [1, 100]");
-  ExpectError(RunProgram(tmp, kProgram, "high '" + png + "'"), "QUALITY must be an integer in [1, 100]");
-  ExpectError(RunProgram(tmp, kProgram, "80"), "expected QUALITY and at least one FILE");
-  ExpectError(RunProgram(tmp, kProgram, "80 '" + (tmp.path() / "missing.png").string() + "'"), "cannot read an image");
+  ExpectError(RunProgram(tmp, kProgram, "--quality 0 --images '" + png + "'"), "--quality must be given, in [1, 100]");
+  ExpectError(RunProgram(tmp, kProgram, "--quality high --images '" + png + "'"), "quality");
+  ExpectError(RunProgram(tmp, kProgram, "--quality 80"), "--images must name at least one file");
+  ExpectError(RunProgram(tmp, kProgram, "--quality 80 --images '" + (tmp.path() / "missing.png").string() + "'"), "cannot read an image");
   const cv::Mat deep(8, 8, CV_16UC1, cv::Scalar(1000));
   const std::string deep_png = (tmp.path() / "deep.png").string();
   ASSERT_TRUE(cv::imwrite(deep_png, deep));
-  ExpectError(RunProgram(tmp, kProgram, "80 '" + deep_png + "'"), "only 8-bit");
+  ExpectError(RunProgram(tmp, kProgram, "--quality 80 --images '" + deep_png + "'"), "only 8-bit");
   EXPECT_EQ(ReadFileBytes(png), before);
   const auto help = RunProgram(tmp, kProgram, "--help");
   EXPECT_EQ(help.status, 0);
-  EXPECT_NE(help.out.find("usage: dispmvs_jpeg_recompress QUALITY FILE..."), std::string::npos);
+  EXPECT_NE(help.out.find("Usage: dispmvs_jpeg_recompress --quality Q --images FILE..."), std::string::npos);
 }
 
 }  // namespace

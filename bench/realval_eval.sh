@@ -77,7 +77,7 @@ for source in "$realval"/$pairs_glob/; do
       mv "$ws/sparse/cameras.txt.new" "$ws/sparse/cameras.txt"
     fi
     if [ -n "$jpeg_quality" ]; then
-      "$build/bench/dispmvs_jpeg_recompress" "$jpeg_quality" "$ws"/images/* ||
+      "$build/bench/dispmvs_jpeg_recompress" --quality "$jpeg_quality" --images "$ws"/images/* ||
         { echo "error: JPEG recompression failed on $pair" >&2; exit 1; }
     fi
     "$build/src/dispmvs_colmap" --workspace_path "$ws" --no_report "${colmap_options[@]}" \

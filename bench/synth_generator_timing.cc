@@ -34,7 +34,7 @@ int main(int argc, char** argv) {
     config.width = width;
     config.num_views = 6;
     config.supersampling = supersampling;
-    config.photometry.jpeg_quality_min = config.photometry.jpeg_quality_max = jpeg_quality;
+    config.jpeg_quality_min = config.jpeg_quality_max = jpeg_quality;
     dispmvs::synth::GenerateSample(config, 0, torch::kCPU);  // warm-up
     const std::clock_t cpu_start = std::clock();
     const auto start = std::chrono::steady_clock::now();

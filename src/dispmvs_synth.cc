@@ -108,7 +108,7 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
   } else if (options.photometry != "default") {
     throw std::invalid_argument("--photometry must be default or wide, got '" + options.photometry + "'");
   }
-  std::tie(config.photometry.jpeg_quality_min, config.photometry.jpeg_quality_max) =
+  std::tie(config.jpeg_quality_min, config.jpeg_quality_max) =
       dispmvs::synth::ParseJpegQualityRange(options.jpeg_quality);
   config = dispmvs::synth::ConfigForRig(options.rig, config);
   if (!options.texture_dir.empty()) {

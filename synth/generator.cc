@@ -47,8 +47,7 @@ torch::Tensor WorldToCamera(const PinholeCamera& cam, double scale) {
 }
 
 // Photometry ranges at difficulty d: every range pulled towards its neutral
-// value (1 for gain, gamma and white balance; 0 for noise and blur; 100 for
-// the JPEG quality, where one is set) by d.
+// value (1 for gain, gamma and white balance; 0 for noise and blur) by d.
 PhotometryRanges EasierPhotometry(const PhotometryRanges& r, double d) {
   const auto towards_one = [&](double x) { return 1.0 + d * (x - 1.0); };
   PhotometryRanges out = r;
@@ -60,10 +59,6 @@ PhotometryRanges EasierPhotometry(const PhotometryRanges& r, double d) {
   out.noise_sigma_max = d * r.noise_sigma_max;
   out.blur_sigma_max = d * r.blur_sigma_max;
   out.vignetting_max = d * r.vignetting_max;
-  if (r.jpeg_quality_max > 0) {  // towards 100, the least compression
-    out.jpeg_quality_min = static_cast<int>(std::lround(100 - d * (100 - r.jpeg_quality_min)));
-    out.jpeg_quality_max = static_cast<int>(std::lround(100 - d * (100 - r.jpeg_quality_max)));
-  }
   return out;
 }
 
@@ -148,10 +143,10 @@ void SynthConfig::Check() const {
         ph.blur_sigma_max >= 0 && ph.blur_sigma_max <= 10 && ph.vignetting_max >= 0 && ph.vignetting_max <= 0.9)) {
     fail("photometry ranges out of bounds");
   }
-  const bool jpeg_off = ph.jpeg_quality_min == 0 && ph.jpeg_quality_max == 0;
-  if (!jpeg_off && !(ph.jpeg_quality_min >= 1 && ph.jpeg_quality_max >= ph.jpeg_quality_min && ph.jpeg_quality_max <= 100)) {
+  const bool jpeg_off = jpeg_quality_min == 0 && jpeg_quality_max == 0;
+  if (!jpeg_off && !(jpeg_quality_min >= 1 && jpeg_quality_max >= jpeg_quality_min && jpeg_quality_max <= 100)) {
     fail("JPEG quality range must be 1 <= min <= max <= 100 (or both 0: none), got " +
-         std::to_string(ph.jpeg_quality_min) + ", " + std::to_string(ph.jpeg_quality_max));
+         std::to_string(jpeg_quality_min) + ", " + std::to_string(jpeg_quality_max));
   }
   if (dtype != torch::kFloat && dtype != torch::kDouble) fail("dtype must be float32 or float64");
   if (!(difficulty >= 0 && difficulty <= 1)) fail("difficulty must be in [0, 1]");
@@ -188,11 +183,13 @@ SynthScene DrawScene(const SynthConfig& config, uint64_t seed) {
   out.cameras = rig.cameras;
   const PhotometryRanges photometry = d < 1 ? EasierPhotometry(config.photometry, d) : config.photometry;
   for (int v = 0; v < config.num_views; ++v) out.photometry.push_back(RandomPhotometry(photometry, photometry_rng));
-  if (photometry.jpeg_quality_max > 0) {
+  if (config.jpeg_quality_max > 0) {
     // Own stream: compressed scenes keep every other draw of the plain ones.
+    // A lower difficulty moves the range towards 100, the least compression.
+    const auto easier = [&](int q) { return static_cast<int>(std::lround(100 - d * (100 - q))); };
     Rng jpeg_rng = root.Fork(kJpegStream);
     for (ViewPhotometry& p : out.photometry) {
-      p.jpeg_quality = static_cast<int>(jpeg_rng.Int(photometry.jpeg_quality_min, photometry.jpeg_quality_max));
+      p.jpeg_quality = static_cast<int>(jpeg_rng.Int(easier(config.jpeg_quality_min), easier(config.jpeg_quality_max)));
     }
   }
   if (d < 1) {

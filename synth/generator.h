@@ -80,6 +80,11 @@ struct SynthConfig {
   // surface in each view. 0 (the default) renders exactly the images of a
   // configuration without the knob.
   double specular_probability = 0;
+  // JPEG quality of each view drawn uniformly (integers) in [min, max] and
+  // applied last in its photometry (ViewPhotometry::jpeg_quality), from a
+  // random stream of its own, so that compressed scenes are the plain ones
+  // compressed, whatever the photometry ranges; both 0 (the default): none.
+  int jpeg_quality_min = 0, jpeg_quality_max = 0;
 
   // Throws std::invalid_argument on sizes, counts or ranges that make no sense.
   void Check() const;

@@ -388,8 +388,8 @@ TEST(GeneratorTest, SpecularSurfacesAddViewDependentHighlightsOnly) {
 // quality in the range per view), and lower difficulty compresses less.
 TEST(GeneratorTest, JpegQualityCompressesEachViewOnItsOwn) {
   SynthConfig plain = SmallConfig(), jpeg = SmallConfig();
-  jpeg.photometry.jpeg_quality_min = 40;
-  jpeg.photometry.jpeg_quality_max = 90;
+  jpeg.jpeg_quality_min = 40;
+  jpeg.jpeg_quality_max = 90;
   const SynthScene a = DrawScene(plain, 9), b = DrawScene(jpeg, 9);
   ASSERT_EQ(a.photometry.size(), b.photometry.size());
   std::set<int> qualities;
@@ -418,8 +418,8 @@ TEST(GeneratorTest, JpegQualityCompressesEachViewOnItsOwn) {
   for (const ViewPhotometry& p : DrawScene(easier, 9).photometry) EXPECT_GE(p.jpeg_quality, 70);  // 100 - 0.5 x 60
   SynthConfig bad = SmallConfig();
   for (const auto& [low, high] : {std::pair<int, int>{0, 80}, {90, 80}, {50, 101}}) {
-    bad.photometry.jpeg_quality_min = low;
-    bad.photometry.jpeg_quality_max = high;
+    bad.jpeg_quality_min = low;
+    bad.jpeg_quality_max = high;
     EXPECT_THROW(bad.Check(), std::invalid_argument) << low << "," << high;
   }
 }

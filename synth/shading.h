@@ -54,11 +54,6 @@ struct PhotometryRanges {
   // Drawn uniformly in [0, max] per view. 0 (the default) draws nothing, so
   // scenes are exactly those of a configuration without vignetting.
   double vignetting_max = 0.0;
-  // JPEG quality drawn uniformly (integers) in [min, max] per view, by
-  // DrawScene from a random stream of its own (RandomPhotometry leaves it 0),
-  // so that compressed scenes are the plain ones compressed; both 0 (the
-  // default) draw nothing and compress nothing.
-  int jpeg_quality_min = 0, jpeg_quality_max = 0;
 };
 
 // Wider per-view differences than the defaults, as between two photographs

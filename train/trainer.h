@@ -125,7 +125,7 @@ struct TrainOptions {
   // the viewpoint. Validation keeps matte scenes.
   double specular_probability = 0;
   // JPEG quality range of the generated training scenes' views
-  // (synth::PhotometryRanges::jpeg_quality_min/max, drawn per view, with
+  // (synth::SynthConfig::jpeg_quality_min/max, drawn per view, with
   // any photometry setting): both 0 = none. Validation stays uncompressed.
   int64_t jpeg_quality_min = 0, jpeg_quality_max = 0;
   // GRU iterations of the coarse stage in training steps (0 = the config's):

@@ -132,8 +132,6 @@ synth::SynthSample TrainingSample(const TrainOptions& options, const synth::Synt
   if (wide) {
     synth::SynthConfig wide_config = synth_config;
     wide_config.photometry = synth::WidePhotometry();
-    wide_config.photometry.jpeg_quality_min = synth_config.photometry.jpeg_quality_min;
-    wide_config.photometry.jpeg_quality_max = synth_config.photometry.jpeg_quality_max;
     return GenerateUsableSample(wide_config, seed, device);
   }
   return GenerateUsableSample(synth_config, seed, device);
@@ -147,8 +145,8 @@ TrainingSamples::TrainingSamples(const TrainOptions& options, torch::Device devi
   // fit keep SynthConfigFor's defaults.
   synth_config_.supersampling = static_cast<int>(options.supersampling);
   synth_config_.specular_probability = options.specular_probability;
-  synth_config_.photometry.jpeg_quality_min = static_cast<int>(options.jpeg_quality_min);
-  synth_config_.photometry.jpeg_quality_max = static_cast<int>(options.jpeg_quality_max);
+  synth_config_.jpeg_quality_min = static_cast<int>(options.jpeg_quality_min);
+  synth_config_.jpeg_quality_max = static_cast<int>(options.jpeg_quality_max);
   if (options.jpeg_quality_max > 0) {
     log.Line("JPEG compression: quality " + std::to_string(options.jpeg_quality_min) + "-" +
              std::to_string(options.jpeg_quality_max) + " per view of the generated training scenes");
