@@ -83,6 +83,10 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        po::value<double>(&config.specular_probability)->default_value(config.specular_probability, "0"),
        "Share of the objects and walls with a glossy coat: a white highlight that stands elsewhere "
        "on the surface in every view (strength 0.15-0.6, Blinn-Phong exponent 8-256).")
+      ("background_at_infinity", po::bool_switch(&config.background_at_infinity),
+       "Draw the outdoor scenes' sky at infinity: no parallax between views, and no depth there "
+       "(0 in the ground truth, as for a real sky). Without it the sky is a finite sphere "
+       "700-1200 units away, with its depth.")
       ("supersampling", po::value<int>(&config.supersampling)->default_value(config.supersampling),
        "Rays per pixel along each axis (odd, 1 to 7): each pixel's colour is the mean of s x s rays "
        "inside it, as a camera integrates light over the pixel; 1 is one ray through the centre, "

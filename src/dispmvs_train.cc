@@ -137,6 +137,10 @@ options (default):
   --jpeg_quality Q|MIN,MAX    training: each view of the generated scenes compressed as a JPEG
                               of this quality (1-100, drawn per view): 8-bit samples, 4:2:0
                               chroma, 8 x 8 block artefacts, as photographs; 0 = none (0)
+  --background_at_infinity 0|1
+                              training: the generated outdoor scenes' sky at infinity, with no
+                              parallax and no depth (so not supervised), as a real sky; 0 keeps
+                              a finite sky 700-1200 units away with its depth (0)
   --batch B                   samples per step (1)
   --steps S                   total steps (1000)
   --lr LR                     Adam learning rate (2e-4)
@@ -317,6 +321,7 @@ CommandLine Parse(int argc, char** argv) {
     else if (flag == "--supersampling") o.supersampling = ParseInt(flag, value);
     else if (flag == "--specular_probability") o.specular_probability = ParseDouble(flag, value);
     else if (flag == "--val_supersampling") o.val_supersampling = ParseInt(flag, value);
+    else if (flag == "--background_at_infinity") o.background_at_infinity = ParseSwitch(flag, value);
     else if (flag == "--jpeg_quality") {
       const auto [low, high] = dispmvs::synth::ParseJpegQualityRange(value);
       o.jpeg_quality_min = low;

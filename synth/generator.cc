@@ -210,6 +210,9 @@ SynthScene DrawScene(const SynthConfig& config, uint64_t seed) {
       p.shininess = material_rng.LogUniform(8, 256);
     }
   }
+  if (config.background_at_infinity && out.rig == RigKind::kOutdoor) {
+    for (Primitive& p : out.scene.primitives) p.at_infinity = p.inside && p.shape == Shape::kSphere;
+  }
   out.scale = scale_rng.LogUniform(config.scale_min, config.scale_max);
   return out;
 }

@@ -85,6 +85,14 @@ struct SynthConfig {
   // random stream of its own, so that compressed scenes are the plain ones
   // compressed, whatever the photometry ranges; both 0 (the default): none.
   int jpeg_quality_min = 0, jpeg_quality_max = 0;
+  // The outdoor rig's sky (its background sphere, 700-1200 units away)
+  // drawn at infinity (Primitive::at_infinity): no parallax at all between
+  // views, and no depth there (0, "no surface"), as a real sky has none, so
+  // training does not supervise it and the depth range ignores it. Off (the
+  // default), the sky is a finite sphere with a ground-truth depth and about
+  // a pixel of parallax. Draws nothing: the scenes are otherwise those of a
+  // configuration without the knob, and other rigs are unchanged.
+  bool background_at_infinity = false;
 
   // Throws std::invalid_argument on sizes, counts or ranges that make no sense.
   void Check() const;

@@ -382,6 +382,57 @@ TEST(GeneratorTest, SpecularSurfacesAddViewDependentHighlightsOnly) {
   EXPECT_THROW(bad.Check(), std::invalid_argument);
 }
 
+// The outdoor sky at infinity (SynthConfig::background_at_infinity): the sky
+// loses its depth and nothing else does (but for the horizon, where ground
+// as far as the sky meets it); a copy of the reference moved 40 units
+// sideways (the rig's baselines are 0.2-2) without turning sees the sky in
+// exactly the same pixels' colours, while the finite sky moves; other rigs
+// stay bit for bit.
+TEST(GeneratorTest, BackgroundAtInfinityHasNoDepthAndNoParallax) {
+  const SynthConfig finite = OnlyRig(SmallConfig(), RigKind::kOutdoor);
+  SynthConfig infinite = finite;
+  infinite.background_at_infinity = true;
+  int with_sky = 0;
+  for (uint64_t seed : {3u, 4u, 5u}) {
+    SCOPED_TRACE(seed);
+    SynthScene a = DrawScene(finite, seed), b = DrawScene(infinite, seed);
+    for (SynthScene* s : {&a, &b}) {
+      s->cameras.resize(2);
+      PinholeCamera moved = s->cameras[0];
+      const Vec3 centre = moved.Center() + 40.0 * (Transposed(moved.rotation) * Vec3{1, 0, 0});
+      moved.translation = -1.0 * (moved.rotation * centre);
+      s->cameras[1] = moved;
+      s->photometry.assign(2, ViewPhotometry{});
+    }
+    const SynthSample plain = RenderSample(a, finite, torch::kCPU), sky = RenderSample(b, infinite, torch::kCPU);
+    EXPECT_TRUE(torch::equal(plain.world_to_camera, sky.world_to_camera));
+    // The reference: no depth exactly where the finite sky was (hundreds of
+    // units away), the same depth elsewhere.
+    const torch::Tensor no_depth = sky.depths[0] == 0;
+    const int64_t sky_pixels = no_depth.sum().item<int64_t>();
+    if (sky_pixels > no_depth.numel() / 20) ++with_sky;
+    EXPECT_TRUE((plain.depths[0].masked_select(no_depth) > 300 * a.scale).all().item<bool>());
+    const torch::Tensor has_depth = ~no_depth;
+    const double same = (plain.depths[0] == sky.depths[0]).masked_select(has_depth).to(torch::kDouble).mean().item<double>();
+    EXPECT_GT(same, 0.99);
+    // Where both views see the sky, the same colours at the same pixels.
+    const torch::Tensor both = ((sky.depths[0] == 0) & (sky.depths[1] == 0)).expand({3, -1, -1});
+    if (sky_pixels == 0) continue;
+    EXPECT_TRUE(torch::equal(sky.images[0].masked_select(both), sky.images[1].masked_select(both)));
+    const double finite_shift =
+        (plain.images[0].masked_select(both) - plain.images[1].masked_select(both)).abs().mean().item<double>();
+    EXPECT_GT(finite_shift, 1e-3);
+  }
+  EXPECT_GE(with_sky, 2);
+  for (RigKind kind : {RigKind::kTable, RigKind::kWalkThrough, RigKind::kTurntable}) {
+    SynthConfig off = OnlyRig(SmallConfig(), kind), on = off;
+    on.background_at_infinity = true;
+    const SynthSample x = GenerateSample(off, 11, torch::kCPU), y = GenerateSample(on, 11, torch::kCPU);
+    EXPECT_TRUE(torch::equal(x.images, y.images));
+    EXPECT_TRUE(torch::equal(x.depths, y.depths));
+  }
+}
+
 // JPEG compression per view: the geometry and every other draw stay (all
 // views' photometry: the qualities come from a stream of their own), each
 // image is the uncompressed one through that view's JPEG round trip (a

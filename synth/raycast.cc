@@ -320,6 +320,13 @@ torch::Tensor CameraDirections(const PinholeCamera& camera, const torch::Tensor&
   return torch::stack({dx, dy, torch::ones_like(dx)}, -1);
 }
 
+// Where `p` stands for `camera`: a primitive at infinity (a sky) is centred
+// on the camera, so that where a ray meets it depends on the ray's direction
+// alone (Primitive::at_infinity).
+Vec3 CentreSeenFrom(const Primitive& p, const PinholeCamera& camera) {
+  return p.at_infinity ? camera.Center() : p.center;
+}
+
 // Nearest primitive of every ray: updates t / primitive / face (views of the
 // caller's buffers, same leading shape as dir_cam) in place.
 void NearestOfPrimitive(const Scene& scene, int64_t index, const PinholeCamera& camera,
@@ -327,7 +334,7 @@ void NearestOfPrimitive(const Scene& scene, int64_t index, const PinholeCamera& 
                         torch::Tensor face, const RaycastOptions& options) {
   const Primitive& p = scene.primitives[static_cast<size_t>(index)];
   LocalRays rays;
-  rays.origin = Transposed(p.rotation) * (camera.Center() - p.center);
+  rays.origin = Transposed(p.rotation) * (camera.Center() - CentreSeenFrom(p, camera));
   // d_local = Rp^T R^T d_cam, i.e. as a row vector d_cam (R Rp).
   rays.dir = torch::matmul(dir_cam, ToTensor(camera.rotation * p.rotation, dir_cam.options()));
   const Hit hit = Intersect(p, rays, t, options);
@@ -352,7 +359,7 @@ RayHits Finish(const Scene& scene, const PinholeCamera& camera, const torch::Ten
     const torch::Tensor index = torch::nonzero(primitive == static_cast<int64_t>(i)).squeeze(1);
     if (index.numel() == 0) continue;
     const Primitive& p = scene.primitives[i];
-    const Vec3 origin = Transposed(p.rotation) * (camera.Center() - p.center);
+    const Vec3 origin = Transposed(p.rotation) * (camera.Center() - CentreSeenFrom(p, camera));
     const torch::Tensor dir_local =
         torch::matmul(dir_cam.index_select(0, index), ToTensor(camera.rotation * p.rotation, t.options()));
     const torch::Tensor q = torch::tensor({origin.x, origin.y, origin.z}, torch::kDouble).to(t.options()) +
@@ -364,6 +371,7 @@ RayHits Finish(const Scene& scene, const PinholeCamera& camera, const torch::Ten
     normal = torch::where(away, -normal, normal);
     hits.uv.index_copy_(0, index, uv);
     hits.normal.index_copy_(0, index, normal);
+    if (p.at_infinity) hits.depth.index_fill_(0, index, 0.0);  // a sky has no depth
   }
   return hits;
 }

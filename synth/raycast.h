@@ -40,7 +40,10 @@ struct RaycastOptions {
 };
 
 struct RayHits {
-  torch::Tensor depth;      // [...]: camera-frame z of the nearest hit; 0 where nothing is hit
+  // [...]: camera-frame z of the nearest hit; 0 where nothing is hit and
+  // where the hit is on a primitive at infinity (Primitive::at_infinity: a
+  // sky, which has no depth; its other fields are set as for any hit).
+  torch::Tensor depth;
   torch::Tensor primitive;  // [...] int64: index into Scene::primitives; -1 where nothing is hit
   torch::Tensor uv;         // [...,2]: surface UV of the hit (0 where nothing is hit)
   torch::Tensor normal;     // [...,3]: unit world normal, turned towards the camera (0 where nothing is hit)

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -342,6 +343,68 @@ TEST(RaycastTest, ScaledSceneGivesScaledDepthAndSameUv) {
   }
 }
 
+// A sphere at infinity (a sky) is where the ray's direction alone says, in
+// every camera however far apart: its UV and normal are those of the point
+// radius x (unit direction) around its centre, computed here from the
+// direction alone, and its depth reads 0. A finite object in front of it
+// keeps its depth. The same sphere not at infinity is seen elsewhere (the
+// check can fail).
+TEST(RaycastTest, SphereAtInfinityDependsOnTheDirectionAlone) {
+  constexpr double kRadius = 500, kUnit = 7;
+  Scene scene;
+  scene.textures.push_back(TextureSpec{});
+  const Mat3 sky_rotation = AxisAngle({0.3, -0.5, 0.8}, 0.7);
+  Primitive sky = MakePrimitive(Shape::kSphere, {30, -20, 10}, {kRadius, kRadius, kRadius}, sky_rotation);
+  sky.inside = sky.at_infinity = true;
+  sky.uv_unit = kUnit;
+  scene.primitives.push_back(sky);
+  scene.primitives.push_back(MakePrimitive(Shape::kSphere, {0.5, 0.2, 6}, {1, 1, 1}, Mat3::Identity()));
+  Scene finite = scene;
+  finite.primitives[0].at_infinity = false;
+
+  PinholeCamera near_origin = PinholeCamera::LookAt({0, 0, 0}, {0, 0, 1}, {0, -1, 0});
+  PinholeCamera far_away = PinholeCamera::LookAt({60, 35, -15}, {61, 35.2, -14}, {0, -1, 0});
+  for (PinholeCamera* cam : {&near_origin, &far_away}) {
+    cam->fx = cam->fy = 30;
+    cam->cx = 23.5;
+    cam->cy = 15.5;
+  }
+  RaycastOptions options;
+  options.dtype = torch::kDouble;
+  const Eigen::Matrix3d rp = ToEigen(sky_rotation);
+  for (const PinholeCamera* cam : {&near_origin, &far_away}) {
+    const RayHits hits = CastImage(scene, *cam, 32, 48, options);
+    const RayHits moved = CastImage(finite, *cam, 32, 48, options);
+    const Eigen::Matrix3d r = ToEigen(cam->rotation);
+    int on_sky = 0, on_object = 0;
+    double largest_shift = 0;
+    for (int i = 0; i < 32; ++i) {
+      for (int j = 0; j < 48; ++j) {
+        const int64_t primitive = hits.primitive[i][j].item<int64_t>();
+        if (primitive == 1) {
+          EXPECT_GT(hits.depth[i][j].item<double>(), 4.0);
+          ++on_object;
+          continue;
+        }
+        ASSERT_EQ(primitive, 0);
+        ++on_sky;
+        EXPECT_EQ(hits.depth[i][j].item<double>(), 0.0);
+        const Vector3d direction = (r.transpose() * Vector3d((j - cam->cx) / cam->fx, (i - cam->cy) / cam->fy, 1)).normalized();
+        const Vector3d local = rp.transpose() * (kRadius * direction);
+        const double u = std::atan2(local.y(), local.x()) * kRadius / kUnit;
+        const double v = std::asin(local.z() / kRadius) * kRadius / kUnit;
+        EXPECT_NEAR(hits.uv[i][j][0].item<double>(), u, 1e-9);
+        EXPECT_NEAR(hits.uv[i][j][1].item<double>(), v, 1e-9);
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(hits.normal[i][j][a].item<double>(), -direction[a], 1e-9);
+        largest_shift = std::max(largest_shift, std::abs(moved.uv[i][j][0].item<double>() - u));
+      }
+    }
+    EXPECT_GT(on_sky, 1000);
+    if (cam == &near_origin) EXPECT_GT(on_object, 50);  // the object stands in front of it
+    EXPECT_GT(largest_shift, 0.05);  // a finite sphere shows parallax
+  }
+}
+
 TEST(RaycastTest, RejectsBadInput) {
   Scene scene = TestScene();
   const PinholeCamera cam = TestCamera(31.5, 23.5);
@@ -355,6 +418,17 @@ TEST(RaycastTest, RejectsBadInput) {
   scene = TestScene();
   scene.primitives[1].half_size.x = -1;
   EXPECT_THROW(CastImage(scene, cam, 8, 8), std::invalid_argument);
+  // Only a sphere enclosure can be at infinity.
+  for (const bool inside : {false, true}) {
+    for (const Shape shape : {Shape::kSphere, Shape::kBox}) {
+      if (inside && shape == Shape::kSphere) continue;
+      scene = TestScene();
+      scene.primitives[0].shape = shape;
+      scene.primitives[0].inside = inside;
+      scene.primitives[0].at_infinity = true;
+      EXPECT_THROW(CastImage(scene, cam, 8, 8), std::invalid_argument);
+    }
+  }
 }
 
 }  // namespace

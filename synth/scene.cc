@@ -79,6 +79,9 @@ void Scene::Check() const {
     if (p.inside && p.shape != Shape::kBox && p.shape != Shape::kSphere) {
       throw std::invalid_argument(name + ": only boxes and spheres can be enclosures");
     }
+    if (p.at_infinity && !(p.inside && p.shape == Shape::kSphere)) {
+      throw std::invalid_argument(name + ": only a sphere enclosure can be at infinity");
+    }
     for (const HeightBump& b : p.bumps)
       if (!(b.sigma > 0) || !std::isfinite(b.amplitude)) throw std::invalid_argument(name + " has a bad bump");
   }

@@ -46,6 +46,12 @@ struct Primitive {
   Vec3 center;     // local origin in world coordinates
   Vec3 half_size{1, 1, 1};
   bool inside = false;
+  // A sphere enclosure seen as if infinitely far away (a sky): every camera
+  // sees it centred on its own centre, so where it shows depends on the
+  // ray's direction alone (no parallax between views however far apart),
+  // and it has no depth (the renderer reads 0 there, "no surface", as for
+  // a real sky). Only a sphere enclosure (`inside`) can be.
+  bool at_infinity = false;
   int texture = 0;       // index into Scene::textures
   // A glossy coat (shading.h, ShadeSpecular): a white Blinn-Phong highlight
   // of strength `specular` (0 = matte, the default) and exponent

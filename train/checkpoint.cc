@@ -142,6 +142,7 @@ std::optional<std::string> SettingBeforeItExisted(const std::string& key) {
   if (key == "supersampling") return "1";
   if (key == "specular_probability") return std::to_string(0.0);
   if (key == "jpeg_quality") return "";
+  if (key == "background_at_infinity") return "0";
   return std::nullopt;
 }
 
@@ -241,7 +242,8 @@ Settings RunSettings(const TrainOptions& o) {
           {"supersampling", std::to_string(o.supersampling)},
           {"specular_probability", std::to_string(o.specular_probability)},
           {"jpeg_quality", o.jpeg_quality_max == 0 ? "" : std::to_string(o.jpeg_quality_min) + "," +
-                                                           std::to_string(o.jpeg_quality_max)}};
+                                                           std::to_string(o.jpeg_quality_max)},
+          {"background_at_infinity", o.background_at_infinity ? "1" : "0"}};
 }
 
 void SaveCheckpoint(const fs::path& dir, int64_t step, DispMvsNet& net, const ModelConfig& config,

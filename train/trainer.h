@@ -128,6 +128,10 @@ struct TrainOptions {
   // (synth::SynthConfig::jpeg_quality_min/max, drawn per view, with
   // any photometry setting): both 0 = none. Validation stays uncompressed.
   int64_t jpeg_quality_min = 0, jpeg_quality_max = 0;
+  // The generated training scenes' outdoor sky at infinity
+  // (synth::SynthConfig::background_at_infinity): no parallax and no depth,
+  // so not supervised. Validation keeps the finite sky.
+  bool background_at_infinity = false;
   // GRU iterations of the coarse stage in training steps (0 = the config's):
   // cheaper steps; validation and the saved weights keep the config's.
   int64_t train_coarse_iterations = 0;

@@ -484,6 +484,49 @@ TEST(TrainerV2Test, GlossySurfacesChangeTrainingImagesOnly) {
   for (size_t i = 0; i < val_plain.size(); ++i) EXPECT_TRUE(torch::equal(val_plain[i].images, val_glossy[i].images));
 }
 
+// --background_at_infinity takes the depth off the training scenes' outdoor
+// sky (which no longer shows parallax) and changes no other scene; said in
+// the log, a run setting; the validation scenes keep their finite sky.
+TEST(TrainerV2Test, BackgroundAtInfinityTakesTheOutdoorSkysDepthOnly) {
+  TempDir tmp;
+  TrainOptions o = TinyV2Options(tmp.path() / "sky", 2);
+  o.difficulty_start = 1;
+  std::ostringstream console;
+  internal::Logger log(console, tmp.path() / "log.txt");
+  TrainOptions sky = o;
+  sky.background_at_infinity = true;
+  internal::TrainingSamples finite_samples(o, torch::kCPU, log), sky_samples(sky, torch::kCPU, log);
+  int outdoor = 0;
+  for (int64_t step = 0; step < 8; ++step) {
+    const auto finite = finite_samples.ForStep(step), infinite = sky_samples.ForStep(step);
+    ASSERT_EQ(finite.size(), infinite.size());
+    for (size_t i = 0; i < finite.size(); ++i) {
+      EXPECT_TRUE(torch::equal(finite[i].world_to_camera, infinite[i].world_to_camera));
+      if (finite[i].rig != "outdoor") {
+        EXPECT_TRUE(torch::equal(finite[i].depths, infinite[i].depths));
+        EXPECT_TRUE(torch::equal(finite[i].images, infinite[i].images));
+        continue;
+      }
+      const torch::Tensor lost = (infinite[i].depths == 0) & (finite[i].depths > 0);
+      if (lost.any().item<bool>()) ++outdoor;
+      EXPECT_TRUE((finite[i].depths.masked_select(lost) > 300 * finite[i].scale).all().item<bool>());
+    }
+  }
+  EXPECT_GE(outdoor, 1);
+  EXPECT_NE(console.str().find("outdoor sky at infinity"), std::string::npos) << console.str();
+  const auto val_finite = internal::ValidationScenes(o, torch::kCPU), val_sky = internal::ValidationScenes(sky, torch::kCPU);
+  for (size_t i = 0; i < val_finite.size(); ++i) EXPECT_TRUE(torch::equal(val_finite[i].depths, val_sky[i].depths));
+
+  TrainOptions run = TinyV2Options(tmp.path() / "sky_run", 1);
+  run.background_at_infinity = true;
+  std::ostringstream first;
+  Train(run, first);
+  run.steps = 2;
+  run.background_at_infinity = false;  // resuming with other training scenes is refused
+  std::ostringstream again;
+  EXPECT_THROW(Train(run, again), std::runtime_error);
+}
+
 // --jpeg_quality compresses the training scenes' views (8-bit samples),
 // with the default and the wide photometry alike: same geometry, said in the
 // log, a run setting; the validation scenes stay uncompressed.

@@ -147,6 +147,10 @@ TrainingSamples::TrainingSamples(const TrainOptions& options, torch::Device devi
   synth_config_.specular_probability = options.specular_probability;
   synth_config_.jpeg_quality_min = static_cast<int>(options.jpeg_quality_min);
   synth_config_.jpeg_quality_max = static_cast<int>(options.jpeg_quality_max);
+  synth_config_.background_at_infinity = options.background_at_infinity;
+  if (options.background_at_infinity) {
+    log.Line("outdoor sky at infinity: no parallax and no depth (unsupervised) in the generated training scenes");
+  }
   if (options.jpeg_quality_max > 0) {
     log.Line("JPEG compression: quality " + std::to_string(options.jpeg_quality_min) + "-" +
              std::to_string(options.jpeg_quality_max) + " per view of the generated training scenes");
