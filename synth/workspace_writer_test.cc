@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <stdexcept>
@@ -170,6 +171,56 @@ TEST_F(WrittenWorkspaceTest, GroundTruthCloudAndConfigs) {
   EXPECT_TRUE(fs::is_directory(Root() / "stereo" / "depth_maps"));
   const std::string readme = ReadFileBytes(Root() / "ground_truth" / "README.txt");
   EXPECT_NE(readme.find("Sampling: colmap-dense"), std::string::npos);
+}
+
+// With the outdoor sky at infinity the written ground truth has no depth on
+// the sky (where the finite sky's is hundreds of units away), the same depth
+// elsewhere but at the horizon, and no sparse point lies on the sky.
+TEST(SynthDatasetTest, SkyAtInfinityHasNoGroundTruthAndNoSparsePoints) {
+  TempDir tmp;
+  SynthWorkspaceOptions finite = SmallOptions();
+  finite.config = ConfigForRig("outdoor", finite.config);
+  SynthWorkspaceOptions infinite = finite;
+  infinite.config.background_at_infinity = true;
+  WriteSynthWorkspace(tmp.path() / "finite", finite, kSeed);
+  WriteSynthWorkspace(tmp.path() / "infinite", infinite, kSeed);
+  const double scale = DrawScene(finite.config, kSeed).scale;
+  int64_t sky = 0, kept = 0, same = 0;
+  for (int i = 0; i < 4; ++i) {
+    const std::string name = "view_0" + std::to_string(i) + ".png.bin";
+    const auto a = colmap_io::ReadDenseArray(tmp.path() / "finite" / "ground_truth" / "depth_maps" / name);
+    const auto b = colmap_io::ReadDenseArray(tmp.path() / "infinite" / "ground_truth" / "depth_maps" / name);
+    for (int row = 0; row < 64; ++row) {
+      for (int col = 0; col < 96; ++col) {
+        if (b.at(row, col) == 0) {
+          ++sky;
+          EXPECT_GT(a.at(row, col), 300 * scale);
+        } else {
+          ++kept;
+          same += a.at(row, col) == b.at(row, col);
+        }
+      }
+    }
+  }
+  EXPECT_GT(sky, 4 * 64 * 96 / 20);
+  EXPECT_GT(same, 0.99 * kept);
+  const colmap_io::SparseModel model = colmap_io::ReadSparseModel(tmp.path() / "infinite" / "sparse");
+  ASSERT_GE(model.points3D.size(), 20u);
+  for (const auto& [id, point] : model.points3D) {
+    for (const colmap_io::TrackElement& element : point.track) {
+      const colmap_io::Image& image = model.images.at(element.image_id);
+      const colmap_io::Camera& camera = model.cameras.at(image.camera_id);
+      const Eigen::Vector3d uvw = camera.CalibrationMatrix() * (image.RotationMatrix() * point.xyz + image.tvec);
+      const auto depth = colmap_io::ReadDenseArray(tmp.path() / "infinite" / "ground_truth" / "depth_maps" /
+                                                   (image.name + ".bin"));
+      // Some ground-truth sample around the observation has a depth (all
+      // four are 0 on the sky).
+      const int c0 = std::clamp(static_cast<int>(std::floor(uvw.x() / uvw.z())), 0, 94);
+      const int r0 = std::clamp(static_cast<int>(std::floor(uvw.y() / uvw.z())), 0, 62);
+      const float nearest = std::max({depth.at(r0, c0), depth.at(r0, c0 + 1), depth.at(r0 + 1, c0), depth.at(r0 + 1, c0 + 1)});
+      EXPECT_GT(nearest, 0) << "point " << id << " in " << image.name;
+    }
+  }
 }
 
 TEST(SynthDatasetTest, IsDeterministicAndSkipsCompleteScenesOnReRun) {
