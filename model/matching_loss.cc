@@ -1,6 +1,7 @@
 #include "model/matching_loss.h"
 
 #include <algorithm>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -138,6 +139,24 @@ MatchingLossResult MatchingLoss(const StageMatching& m, const GroundTruthMatches
   const torch::Tensor hit = counted & ((e_best - e_gt).abs() <= 1.0);
   result.count = count.item<double>();
   result.top1 = hit.sum().item<double>();
+
+  // The peaks: local maxima along the segment (the arg-max is one), inside.
+  const torch::Tensor lowest = torch::full_like(m.logits.narrow(1, 0, 1), -std::numeric_limits<double>::infinity());
+  const torch::Tensor before = torch::cat({lowest, m.logits.narrow(1, 0, samples - 1)}, 1);
+  const torch::Tensor after = torch::cat({m.logits.narrow(1, 1, samples - 1), lowest}, 1);
+  const torch::Tensor is_peak = m.inside & (m.logits >= before) & (m.logits >= after);
+  const torch::Tensor peak_logits = torch::where(is_peak, m.logits, lowest.expand_as(m.logits));
+  const auto [best_peaks, peak_index] = peak_logits.topk(std::min<int64_t>(4, samples), 1);
+  const torch::Tensor near_truth =
+      torch::isfinite(best_peaks) & ((m.sample_eflow.gather(1, peak_index) - e_gt).abs() <= 1.0);
+  // The arg-max counts even where it is outside or flat (top1 above), so
+  // that the k-peak shares never fall below top-1.
+  const auto hits_among = [&](int64_t k) {
+    const torch::Tensor any = near_truth.narrow(1, 0, std::min(k, near_truth.size(1))).any(1, true);
+    return (counted & (any | hit)).sum().item<double>();
+  };
+  result.top2_peaks = hits_among(2);
+  result.top4_peaks = hits_among(4);
   return result;
 }
 

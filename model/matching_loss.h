@@ -61,6 +61,13 @@ struct MatchingLossResult {
   // arg-max sample within one stage pixel of the ground truth (top-1).
   double count = 0;
   double top1 = 0;
+  // How many have a sample within one stage pixel of the truth among the 2 /
+  // 4 highest peaks of their logits (samples inside the image whose logit
+  // is at least both neighbours'): how often the right match is among a
+  // few candidates, what a design that keeps several matches through the
+  // coarse iterations could reach. top1 <= top2_peaks <= top4_peaks.
+  double top2_peaks = 0;
+  double top4_peaks = 0;
 };
 
 // Cross-entropy of `matching` against `truth`. Throws std::invalid_argument

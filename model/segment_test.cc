@@ -412,6 +412,27 @@ TEST(MatchingLoss, CrossEntropyOfAPeakedDistributionAtTheTruth) {
   // Arg-max two samples away: not a top-1 hit.
   m.logits = torch::tensor({5.0, 1.0, 0.0, 0.0, 0.0}, opts).view({1, 5, 1, 1});
   EXPECT_EQ(MatchingLoss(m, truth).top1, 0);
+  // ... but the second-highest peak is at the truth (sample 3, E-flow 13):
+  // a top-2 and top-4 hit. A sample higher than its neighbours but outside
+  // the image is no peak.
+  m.logits = torch::tensor({5.0, 1.0, 0.0, 2.0, 0.0}, opts).view({1, 5, 1, 1});
+  MatchingLossResult peaks = MatchingLoss(m, truth);
+  EXPECT_EQ(peaks.top1, 0);
+  EXPECT_EQ(peaks.top2_peaks, 1);
+  EXPECT_EQ(peaks.top4_peaks, 1);
+  m.inside = torch::tensor({true, true, true, false, true}).view({1, 5, 1, 1});
+  peaks = MatchingLoss(m, truth);
+  EXPECT_EQ(peaks.top2_peaks, 0);
+  m.inside = torch::ones({1, 5, 1, 1}, torch::kBool);
+  // The third-highest peak at the truth: only a top-4 hit (sample 3, on a
+  // slope, is no peak).
+  m.logits = torch::tensor({5.0, 1.0, 3.0, 2.0, 4.0}, opts).view({1, 5, 1, 1});
+  m.sample_eflow = torch::tensor({10.0, 11.0, 12.5, 15.0, 18.0}, opts).view({1, 5, 1, 1});
+  peaks = MatchingLoss(m, truth);
+  EXPECT_EQ(peaks.top1, 0);
+  EXPECT_EQ(peaks.top2_peaks, 0);
+  EXPECT_EQ(peaks.top4_peaks, 1);
+  m.sample_eflow = (torch::arange(5, opts) + 10).view({1, 5, 1, 1});
   // Truth outside the sampled interval or masked: not counted, loss 0.
   truth.xy = torch::tensor({20.0, 0.0}, opts).view({1, 2, 1, 1});
   EXPECT_EQ(MatchingLoss(m, truth).count, 0);

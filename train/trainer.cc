@@ -228,8 +228,9 @@ double TrainingWideningAt(const TrainOptions& options, int64_t step) {
 }
 
 std::string FormatMatching(const WideningResult& r) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, "coarse top-1: %.4f", r.coarse_top1);
+  char buffer[96];
+  std::snprintf(buffer, sizeof buffer, "coarse top-1: %.4f  in the 2 / 4 best peaks: %.4f / %.4f", r.coarse_top1,
+                r.coarse_top2_peaks, r.coarse_top4_peaks);
   return buffer;
 }
 

@@ -235,8 +235,12 @@ struct WideningResult {
   double seen_share = 0;
   SourcePixelShares source_pixels;
   // Coarse matching: share of ground-truth matches whose arg-max along the
-  // segment volume is within one 1/16 pixel (pairs counted: matching_count).
+  // segment volume is within one 1/16 pixel (pairs counted: matching_count),
+  // and whose 2 / 4 highest peaks hold one that is
+  // (model::MatchingLossResult::top2_peaks, top4_peaks).
   double coarse_top1 = 0;
+  double coarse_top2_peaks = 0;
+  double coarse_top4_peaks = 0;
   double matching_count = 0;
 };
 

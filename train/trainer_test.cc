@@ -651,7 +651,9 @@ TEST(TrainerV2Test, EvaluationWithoutAHintOnlyForV2Weights) {
   EXPECT_GT(rows[1].metrics.gt_pixels, 0);
   EXPECT_GT(rows[1].matching_count, 0);
   EXPECT_GE(rows[1].coarse_top1, 0.0);
-  EXPECT_LE(rows[1].coarse_top1, 1.0);
+  EXPECT_LE(rows[1].coarse_top1, rows[1].coarse_top2_peaks);
+  EXPECT_LE(rows[1].coarse_top2_peaks, rows[1].coarse_top4_peaks);
+  EXPECT_LE(rows[1].coarse_top4_peaks, 1.0);
   EXPECT_THROW(EvaluateWeights((tmp.path() / "paper" / "model.safetensors").string(), eval, {0}),
                std::invalid_argument);
 }

@@ -2,6 +2,7 @@
 
 #include <ATen/CPUGeneratorImpl.h>
 
+#include <algorithm>
 #include <stdexcept>
 #include <string>
 #include <utility>
@@ -20,14 +21,15 @@ namespace {
 
 using model::DispMvsNet;
 
-// Coarse matching accuracy on the validation scenes (WideningResult's
-// coarse_top1 and matching_count). It does not depend on the depth-range
-// hint, so it is measured once per validation, not once per widening.
-std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes) {
+// Coarse matching accuracy on the validation scenes: the sums of
+// model::MatchingLossResult over them. It does not depend on the
+// depth-range hint, so it is measured once per validation, not once per
+// widening.
+model::MatchingLossResult CoarseMatchingAccuracy(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes) {
   const bool was_training = net->is_training();
   net->eval();
   torch::NoGradGuard no_grad;
-  double hits = 0, counted = 0;
+  model::MatchingLossResult sums;
   for (const auto& scene : scenes) {
     const auto batch = MakeBatch({scene}, 1.0);
     const model::StageMatching matching = net->CoarseMatching(batch.input);
@@ -35,11 +37,13 @@ std::pair<double, double> CoarseMatchingAccuracy(DispMvsNet& net, const std::vec
         batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, matching.stride,
         matching.logits.size(2), matching.logits.size(3));
     const auto result = model::MatchingLoss(matching, truth);
-    hits += result.top1;
-    counted += result.count;
+    sums.count += result.count;
+    sums.top1 += result.top1;
+    sums.top2_peaks += result.top2_peaks;
+    sums.top4_peaks += result.top4_peaks;
   }
   net->train(was_training);
-  return {counted > 0 ? hits / counted : 0.0, counted};
+  return sums;
 }
 
 // The depth metrics of a WideningResult on the validation scenes with the
@@ -118,10 +122,13 @@ std::vector<WideningResult> Validate(DispMvsNet& net, const std::vector<synth::S
   for (double x : widenings) {
     results.push_back(ValidateDepth(net, scenes, options, x, look_from_sources, fill_model));
   }
-  const auto [top1, counted] = CoarseMatchingAccuracy(net, scenes);
+  const model::MatchingLossResult coarse = CoarseMatchingAccuracy(net, scenes);
+  const double counted = std::max(coarse.count, 1.0);
   for (auto& row : results) {
-    row.coarse_top1 = top1;
-    row.matching_count = counted;
+    row.coarse_top1 = coarse.top1 / counted;
+    row.coarse_top2_peaks = coarse.top2_peaks / counted;
+    row.coarse_top4_peaks = coarse.top4_peaks / counted;
+    row.matching_count = coarse.count;
   }
   return results;
 }
