@@ -27,12 +27,6 @@ double Percentile(std::vector<double> values, double fraction) {
   return values[static_cast<size_t>(std::lround(fraction * static_cast<double>(values.size() - 1)))];
 }
 
-// Camera centre -R^T t of a world-to-camera matrix [4,4].
-torch::Tensor Centre(const torch::Tensor& world_to_camera) {
-  const torch::Tensor rotation = world_to_camera.slice(0, 0, 3).slice(1, 0, 3);
-  return -rotation.t().matmul(world_to_camera.slice(0, 0, 3).select(1, 3));
-}
-
 void PrintRow(const std::string& name, const std::vector<double>& angles) {
   if (angles.empty()) return;
   const auto share_above = [&](double limit) {
@@ -59,17 +53,20 @@ int main(int argc, char** argv) {
   std::map<std::string, std::vector<double>> by_rig;
   std::vector<double> all;
   for (int seed = 0; seed < scenes; ++seed) {
-    const dispmvs::synth::SynthSample sample = dispmvs::synth::GenerateSample(config, seed, torch::kCPU);
+    const dispmvs::synth::SynthScene scene = dispmvs::synth::DrawScene(config, seed);
+    const dispmvs::synth::SynthSample sample = dispmvs::synth::RenderSample(scene, config, torch::kCPU);
     const torch::Tensor depth = sample.depths[0][0].to(torch::kDouble);
     const torch::Tensor valid = depth.masked_select(depth > 0);
     if (valid.numel() == 0) continue;
-    const torch::Tensor extrinsics = sample.world_to_camera.to(torch::kDouble);
-    const torch::Tensor reference = Centre(extrinsics[0]);
-    const torch::Tensor axis = extrinsics[0].slice(0, 0, 3).slice(1, 0, 3).select(0, 2);  // camera z in the world
-    const torch::Tensor point = reference + valid.median().item<double>() * axis;
-    for (int64_t v = 1; v < extrinsics.size(0); ++v) {
-      const torch::Tensor a = reference - point, b = Centre(extrinsics[v]) - point;
-      const double cosine = (a.dot(b) / (a.norm() * b.norm())).item<double>();
+    // The cameras are at unit scale, the rendered depths metric.
+    using dispmvs::synth::Vec3;
+    const dispmvs::synth::PinholeCamera& first = scene.cameras[0];
+    const Vec3 reference = first.Center();
+    const Vec3 axis = dispmvs::synth::Transposed(first.rotation) * Vec3{0, 0, 1};  // camera z in the world
+    const Vec3 point = reference + (valid.median().item<double>() / scene.scale) * axis;
+    for (size_t v = 1; v < scene.cameras.size(); ++v) {
+      const Vec3 a = reference - point, b = scene.cameras[v].Center() - point;
+      const double cosine = dispmvs::synth::Dot(a, b) / (dispmvs::synth::Norm(a) * dispmvs::synth::Norm(b));
       const double degrees = std::acos(std::clamp(cosine, -1.0, 1.0)) * 180.0 / M_PI;
       by_rig[sample.rig].push_back(degrees);
       all.push_back(degrees);
