@@ -1,10 +1,12 @@
 #include "train/error_breakdown.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <sstream>
 #include <stdexcept>
 
 #include "model/geometry.h"
+#include "model/matching_loss.h"
 #include "model/photometric_refinement.h"
 #include "train/batch.h"
 #include "train/validation.h"
@@ -132,6 +134,35 @@ BreakdownRow Finish(const std::string& label, const RowSums& sums) {
   return {label, FinalizeValidation(sums.depth), SharesOf(sums.source_pixels)};
 }
 
+// A full-resolution mask [1,1,H,W] at the cells of the coarse volume
+// `matching` (cell (i, j) is pixel (stride i, stride j); cells past the
+// image, in the network's padding, are false), one copy per source:
+// [N,1,h,w], the volume's (pair) layout for a batch of one.
+torch::Tensor AtCoarseCells(const torch::Tensor& mask, const model::StageMatching& matching) {
+  using torch::indexing::None;
+  using torch::indexing::Slice;
+  const int64_t stride = matching.stride, sources = matching.logits.size(0);
+  const int64_t rows = matching.logits.size(2), cols = matching.logits.size(3);
+  const torch::Tensor sampled = mask.index({Slice(), Slice(), Slice(None, None, stride), Slice(None, None, stride)});
+  torch::Tensor cells = torch::zeros({1, 1, rows, cols}, mask.options());
+  const int64_t r = std::min(rows, sampled.size(2)), c = std::min(cols, sampled.size(3));
+  cells.narrow(2, 0, r).narrow(3, 0, c).copy_(sampled.narrow(2, 0, r).narrow(3, 0, c));
+  return cells.expand({sources, 1, rows, cols});
+}
+
+void AddMatches(const model::MatchingLossResult& result, model::MatchingLossResult* sums) {
+  sums->count += result.count;
+  sums->top1 += result.top1;
+  sums->top2_peaks += result.top2_peaks;
+  sums->top4_peaks += result.top4_peaks;
+}
+
+CoarseMatchRow FinishMatches(const std::string& label, const model::MatchingLossResult& sums) {
+  const double pairs = std::max(sums.count, 1.0);
+  return {label, sums.top1 / pairs, sums.top2_peaks / pairs, sums.top4_peaks / pairs,
+          static_cast<int64_t>(sums.count)};
+}
+
 }  // namespace
 
 ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSample>& scenes,
@@ -147,6 +178,8 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
   torch::NoGradGuard no_grad;
   std::vector<RowSums> iterations(iteration_count), texture(3), depth(3), oracles(2);
   RowSums refined;
+  // All, then the texture thirds, then the depth thirds.
+  std::vector<model::MatchingLossResult> coarse_matches(7);
   for (size_t i = 0; i < scenes.size(); ++i) {
     const TrainingBatch batch = MakeBatch({scenes[i]}, widening);
     // The seeds of the validation table (validation.cc), so the last
@@ -171,6 +204,23 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
       AddScores(batch, final_depth, texture_bands[b], &texture[b]);
       AddScores(batch, final_depth, depth_bands[b], &depth[b]);
     }
+    {
+      // The coarse volume as the validation table measures it (eval mode).
+      net->eval();
+      const model::StageMatching matching = net->CoarseMatching(batch.input);
+      net->train();
+      const model::GroundTruthMatches truth = model::ComputeGroundTruthMatches(
+          batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, matching.stride,
+          matching.logits.size(2), matching.logits.size(3));
+      AddMatches(model::MatchingLoss(matching, truth), &coarse_matches[0]);
+      for (size_t b = 0; b < 3; ++b) {
+        for (const auto& [bands, first] : {std::make_pair(&texture_bands, 1), std::make_pair(&depth_bands, 4)}) {
+          model::GroundTruthMatches in_band = truth;
+          in_band.valid = truth.valid & AtCoarseCells((*bands)[b], matching);
+          AddMatches(model::MatchingLoss(matching, in_band), &coarse_matches[static_cast<size_t>(first) + b]);
+        }
+      }
+    }
     AddScores(batch, DepthFromTrueMatches(batch), torch::Tensor(), &oracles[0]);
     AddScores(batch, DepthFromTrueGrid(batch, DispMvsNet::Impl::kFineStride), torch::Tensor(), &oracles[1]);
   }
@@ -189,6 +239,9 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
     breakdown.texture.push_back(Finish(texture_names[b], texture[b]));
     breakdown.depth.push_back(Finish(depth_names[b], depth[b]));
   }
+  breakdown.coarse_matches.push_back(FinishMatches("all", coarse_matches[0]));
+  for (size_t b = 0; b < 3; ++b) breakdown.coarse_matches.push_back(FinishMatches(texture_names[b], coarse_matches[1 + b]));
+  for (size_t b = 0; b < 3; ++b) breakdown.coarse_matches.push_back(FinishMatches(depth_names[b], coarse_matches[4 + b]));
   breakdown.oracles.push_back(Finish("oracle matches", oracles[0]));
   breakdown.oracles.push_back(Finish("oracle 1/4 grid", oracles[1]));
   return breakdown;
@@ -212,6 +265,14 @@ std::string FormatBreakdown(const ErrorBreakdown& breakdown) {
   for (const BreakdownRow& row : breakdown.texture) line(row);
   out << "the output by ground-truth depth (thirds per scene):\n";
   for (const BreakdownRow& row : breakdown.depth) line(row);
+  out << "coarse matches ((cell, source) pairs with a visible true match, by the cell's pixel's third):\n"
+         "right within a 1/16 pixel: the arg-max, one of the 2 / 4 highest peaks along the segment\n";
+  for (const CoarseMatchRow& row : breakdown.coarse_matches) {
+    char text[192];
+    std::snprintf(text, sizeof text, "%-15s top-1: %.4f  2 peaks: %.4f  4 peaks: %.4f  (%lld pairs)\n",
+                  row.label.c_str(), row.top1, row.top2_peaks, row.top4_peaks, static_cast<long long>(row.pairs));
+    out << text;
+  }
   out << "oracles: the true matches through the network's geometry (must be exact); the true depth\n"
          "at the fine stage's cells, upsampled bilinearly (a perfect fine stage, a smooth upsampler):\n";
   for (const BreakdownRow& row : breakdown.oracles) line(row);

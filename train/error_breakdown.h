@@ -16,6 +16,12 @@
 //    by ground-truth depth, each in thirds per scene: whether the error sits
 //    on weak texture (ambiguous matches) or on well-textured surfaces
 //    (imprecise matches), near or far.
+//  * The coarse matches (the segment volume's, as the validation table's
+//    coarse top-1) split by the same texture and depth thirds, taken at each
+//    coarse cell's pixel: how often the arg-max, or one of the 2 / 4
+//    highest peaks, is within a 1/16 pixel of the true match. Whether wrong
+//    coarse matches gather on weak texture, and how many a design that
+//    keeps several candidates could recover there.
 //  * Two oracles, scored the same way, without the network:
 //    - "oracle matches": every source's ground-truth match (the source pixel
 //      of the reference's true depth) triangulated and fused with equal
@@ -48,10 +54,19 @@ struct BreakdownRow {
   SourcePixelShares source_pixels;    // over the row's (pixel, seeing source) pairs
 };
 
+// Shares of the (coarse cell, source) pairs with a visible true match
+// (model::MatchingLoss's counts).
+struct CoarseMatchRow {
+  std::string label;  // "all", "texture weak", ..., "depth far"
+  double top1 = 0, top2_peaks = 0, top4_peaks = 0;
+  int64_t pairs = 0;
+};
+
 struct ErrorBreakdown {
   std::vector<BreakdownRow> iterations;  // coarse 1..Tc, fine 1..Tf
   std::vector<BreakdownRow> texture;     // weak, medium, strong
   std::vector<BreakdownRow> depth;       // near, middle, far
+  std::vector<CoarseMatchRow> coarse_matches;  // all, the texture thirds, the depth thirds
   std::vector<BreakdownRow> oracles;     // "oracle matches", "oracle 1/4 grid"
 };
 

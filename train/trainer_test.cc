@@ -603,6 +603,33 @@ TEST(TrainerV2Test, ErrorBreakdownEndsOnTheEvaluationTableAndSplitsEveryPixelOnc
     EXPECT_EQ(pixels, table.metrics.gt_pixels);
     EXPECT_NEAR(within_2, table.metrics.within_2 * static_cast<double>(pixels), 1e-6);
   }
+  // The coarse matches: "all" is the table's coarse top-1; every counted
+  // pair's cell is in exactly one texture and one depth third, so the
+  // thirds' pairs and hits add up to all's; more peaks, more hits.
+  ASSERT_EQ(breakdown.coarse_matches.size(), 7u);
+  const CoarseMatchRow& all = breakdown.coarse_matches[0];
+  EXPECT_EQ(all.label, "all");
+  EXPECT_NEAR(all.top1, table.coarse_top1, 1e-12);
+  EXPECT_NEAR(all.top4_peaks, table.coarse_top4_peaks, 1e-12);
+  EXPECT_EQ(static_cast<double>(all.pairs), table.matching_count);
+  EXPECT_GT(all.pairs, 0);
+  for (size_t first : {1u, 4u}) {
+    int64_t pairs = 0;
+    double top1 = 0, top2 = 0;
+    for (size_t b = first; b < first + 3; ++b) {
+      const CoarseMatchRow& row = breakdown.coarse_matches[b];
+      pairs += row.pairs;
+      top1 += row.top1 * static_cast<double>(row.pairs);
+      top2 += row.top2_peaks * static_cast<double>(row.pairs);
+      EXPECT_LE(row.top1, row.top2_peaks) << row.label;
+      EXPECT_LE(row.top2_peaks, row.top4_peaks) << row.label;
+    }
+    EXPECT_EQ(pairs, all.pairs);
+    EXPECT_NEAR(top1, all.top1 * static_cast<double>(all.pairs), 1e-6);
+    EXPECT_NEAR(top2, all.top2_peaks * static_cast<double>(all.pairs), 1e-6);
+  }
+  EXPECT_EQ(breakdown.coarse_matches[1].label, "texture weak");
+  EXPECT_EQ(breakdown.coarse_matches[6].label, "depth far");
   // The true matches through the geometry give the true depth (float
   // rounding); the true depth on the fine grid, upsampled, comes close.
   ASSERT_EQ(breakdown.oracles.size(), 2u);
