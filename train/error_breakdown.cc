@@ -150,13 +150,6 @@ torch::Tensor AtCoarseCells(const torch::Tensor& mask, const model::StageMatchin
   return cells.expand({sources, 1, rows, cols});
 }
 
-void AddMatches(const model::MatchingLossResult& result, model::MatchingLossResult* sums) {
-  sums->count += result.count;
-  sums->top1 += result.top1;
-  sums->top2_peaks += result.top2_peaks;
-  sums->top4_peaks += result.top4_peaks;
-}
-
 CoarseMatchRow FinishMatches(const std::string& label, const model::MatchingLossResult& sums) {
   const double pairs = std::max(sums.count, 1.0);
   return {label, sums.top1 / pairs, sums.top2_peaks / pairs, sums.top4_peaks / pairs,
@@ -212,12 +205,13 @@ ErrorBreakdown BreakDownErrors(DispMvsNet& net, const std::vector<synth::SynthSa
       const model::GroundTruthMatches truth = model::ComputeGroundTruthMatches(
           batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, matching.stride,
           matching.logits.size(2), matching.logits.size(3));
-      AddMatches(model::MatchingLoss(matching, truth), &coarse_matches[0]);
+      internal::AddMatchCounts(model::MatchingLoss(matching, truth), &coarse_matches[0]);
       for (size_t b = 0; b < 3; ++b) {
         for (const auto& [bands, first] : {std::make_pair(&texture_bands, 1), std::make_pair(&depth_bands, 4)}) {
           model::GroundTruthMatches in_band = truth;
           in_band.valid = truth.valid & AtCoarseCells((*bands)[b], matching);
-          AddMatches(model::MatchingLoss(matching, in_band), &coarse_matches[static_cast<size_t>(first) + b]);
+          internal::AddMatchCounts(model::MatchingLoss(matching, in_band),
+                                   &coarse_matches[static_cast<size_t>(first) + b]);
         }
       }
     }

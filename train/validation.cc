@@ -36,11 +36,7 @@ model::MatchingLossResult CoarseMatchingAccuracy(DispMvsNet& net, const std::vec
     const auto truth = model::ComputeGroundTruthMatches(
         batch.gt_depths, batch.input.intrinsics, batch.input.extrinsics, matching.stride,
         matching.logits.size(2), matching.logits.size(3));
-    const auto result = model::MatchingLoss(matching, truth);
-    sums.count += result.count;
-    sums.top1 += result.top1;
-    sums.top2_peaks += result.top2_peaks;
-    sums.top4_peaks += result.top4_peaks;
+    AddMatchCounts(model::MatchingLoss(matching, truth), &sums);
   }
   net->train(was_training);
   return sums;
@@ -93,6 +89,13 @@ WideningResult ValidateDepth(DispMvsNet& net, const std::vector<synth::SynthSamp
 }
 
 }  // namespace
+
+void AddMatchCounts(const model::MatchingLossResult& result, model::MatchingLossResult* sums) {
+  sums->count += result.count;
+  sums->top1 += result.top1;
+  sums->top2_peaks += result.top2_peaks;
+  sums->top4_peaks += result.top4_peaks;
+}
 
 torch::Generator CpuGenerator(uint64_t seed) {
   return at::make_generator<at::CPUGeneratorImpl>(seed);

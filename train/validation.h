@@ -15,6 +15,7 @@
 
 #include "model/confidence_model.h"
 #include "model/dispmvs_net.h"
+#include "model/matching_loss.h"
 #include "synth/generator.h"
 #include "train/trainer.h"
 
@@ -27,6 +28,10 @@ torch::Generator CpuGenerator(uint64_t seed);
 // hint: " + `consequence`) when `widening` is 0 (no hint) and the weights
 // need one.
 void CheckHintAvailable(model::DispMvsNet& net, double widening, const std::string& consequence);
+
+// Adds `result`'s counts (pairs, top-1 and peak hits; not the loss) to `sums`:
+// the coarse matching accuracy over several scenes or bands.
+void AddMatchCounts(const model::MatchingLossResult& result, model::MatchingLossResult* sums);
 
 // The validation scenes of `options` (its size, view count, scene count and seed base).
 std::vector<synth::SynthSample> ValidationScenes(const TrainOptions& options, torch::Device device);
