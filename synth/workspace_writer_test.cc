@@ -175,7 +175,8 @@ TEST_F(WrittenWorkspaceTest, GroundTruthCloudAndConfigs) {
 
 // With the outdoor sky at infinity the written ground truth has no depth on
 // the sky (where the finite sky's is hundreds of units away), the same depth
-// elsewhere but at the horizon, and no sparse point lies on the sky.
+// elsewhere but where the finite depth is as far (the horizon), and no
+// sparse point lies on the sky.
 TEST(SynthDatasetTest, SkyAtInfinityHasNoGroundTruthAndNoSparsePoints) {
   TempDir tmp;
   SynthWorkspaceOptions finite = SmallOptions();
@@ -185,7 +186,7 @@ TEST(SynthDatasetTest, SkyAtInfinityHasNoGroundTruthAndNoSparsePoints) {
   WriteSynthWorkspace(tmp.path() / "finite", finite, kSeed);
   WriteSynthWorkspace(tmp.path() / "infinite", infinite, kSeed);
   const double scale = DrawScene(finite.config, kSeed).scale;
-  int64_t sky = 0, kept = 0, same = 0;
+  int64_t sky = 0;
   for (int i = 0; i < 4; ++i) {
     const std::string name = "view_0" + std::to_string(i) + ".png.bin";
     const auto a = colmap_io::ReadDenseArray(tmp.path() / "finite" / "ground_truth" / "depth_maps" / name);
@@ -195,15 +196,13 @@ TEST(SynthDatasetTest, SkyAtInfinityHasNoGroundTruthAndNoSparsePoints) {
         if (b.at(row, col) == 0) {
           ++sky;
           EXPECT_GT(a.at(row, col), 300 * scale);
-        } else {
-          ++kept;
-          same += a.at(row, col) == b.at(row, col);
+        } else if (a.at(row, col) != b.at(row, col)) {
+          EXPECT_GT(a.at(row, col), 300 * scale);
         }
       }
     }
   }
   EXPECT_GT(sky, 4 * 64 * 96 / 20);
-  EXPECT_GT(same, 0.99 * kept);
   const colmap_io::SparseModel model = colmap_io::ReadSparseModel(tmp.path() / "infinite" / "sparse");
   ASSERT_GE(model.points3D.size(), 20u);
   for (const auto& [id, point] : model.points3D) {
