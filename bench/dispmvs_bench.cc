@@ -4,6 +4,7 @@
 //   dispmvs_bench [--sizes 640x512,1600x1152] [--sources 5] [--config small,paper]
 //                 [--precision fp32,bf16] [--coarse_iterations N] [--fine_iterations N] [--device cpu|cuda[:i]]
 //                 [--threads 1,2] [--warmup 1] [--reps 3] [--refinement none|ncc]
+//                 [--memory 1|0] [--block_cache_mb MB]
 //
 // Random weights and images: the cost of a pass does not depend on their
 // values (the network has no data-dependent control flow). For every
@@ -21,7 +22,11 @@
 // peak follows the live tensors rather than the allocator's history. On CUDA,
 // the caching allocator's peak of allocated bytes during a pass. The timings
 // then run with the allocator as the programs set it
-// (model/host_allocator.h: freed memory kept for reuse).
+// (model/host_allocator.h: freed memory kept for reuse;
+// model/large_block_cache.h: blocks of 32 MiB and more kept and reused, with
+// --block_cache_mb as their budget, 0 = glibc's mappings as before the
+// cache). --memory 0 skips the memory measurement (it runs every pass with
+// its large buffers mapped afresh, several times slower at large sizes).
 //
 // --refinement ncc adds the photometric refinement that dispmvs_colmap runs
 // after the network by default (model/photometric_refinement.h) to every
@@ -60,6 +65,7 @@
 #include "src/program_main.h"
 #include "model/dispmvs_net.h"
 #include "model/host_allocator.h"
+#include "model/large_block_cache.h"
 #include "model/photometric_refinement.h"
 #include "model/precision.h"
 #include "model/stage_timer.h"
@@ -92,6 +98,8 @@ struct Options {
   int64_t warmup = 1;
   int64_t reps = 3;
   bool refine = false;  // --refinement ncc
+  bool memory = true;   // --memory 0: no peak-memory child
+  int64_t block_cache_mb = static_cast<int64_t>(dispmvs::model::LargeBlockCacheOptions{}.max_cached_bytes >> 20);
   dispmvs::model::PhotometricRefinementOptions refinement;  // --refine_propagation_rounds, _levels
 };
 
@@ -111,6 +119,10 @@ constexpr const char* kUsage =
     "  --threads T[,T...]       intra-op CPU threads (default 2)\n"
     "  --warmup N               untimed passes first (default 1)\n"
     "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n"
+    "  --memory 1|0             measure each row's peak memory first, in a child process (1)\n"
+    "  --block_cache_mb MB      budget of kept large tensor blocks for the timings, 0 = no\n"
+    "                           cache: glibc maps every block of 32 MiB and more afresh\n"
+    "                           (model/large_block_cache.h) (BLOCKCACHE)\n"
     "  --refinement none|ncc    ncc: each pass also runs the photometric refinement of\n"
     "                           dispmvs_colmap's default, timed as the 'refine' column (none)\n"
     "  --refine_steps K         with ncc: the search's hypotheses on each side\n"
@@ -160,6 +172,8 @@ std::string Usage() {
   fill("(AXES)", defaults.trusted_plane_axis_anchors);
   fill("(SHIFT)", defaults.window_shift);
   fill("(LOCAL)", defaults.local_plane_radius);
+  fill("(BLOCKCACHE)",
+       static_cast<int64_t>(dispmvs::model::LargeBlockCacheOptions{}.max_cached_bytes >> 20));
   std::ostringstream trusted;
   trusted << "(" << defaults.trusted_plane_min_ncc << ")";
   usage.replace(usage.find("(TRUSTED)"), 9, trusted.str());
@@ -262,6 +276,10 @@ Options ParseArgs(int argc, char** argv) {
         throw std::invalid_argument("--refinement must be none or ncc, got '" + value + "'");
       }
       o.refine = value == "ncc";
+    } else if (flag == "--memory") {
+      o.memory = ParseInteger(flag, value, 0, 1) == 1;
+    } else if (flag == "--block_cache_mb") {
+      o.block_cache_mb = ParseInteger(flag, value, 0, int64_t{1} << 20);
     } else if (flag == "--refine_steps") {
       o.refinement.steps = ParseInteger(flag, value, 1, 64);
     } else if (flag == "--refine_propagation_rounds") {
@@ -624,7 +642,7 @@ int main(int argc, char** argv) {
     const auto measure_memory = [&](DispMvsNet& net, const DispMvsInput& input, Row& row) {
       row.m.peak_bytes = MeasurePeakMemory(net, input, device, o.refine, o.refinement);
     };
-    if (device.is_cpu()) {
+    if (device.is_cpu() && o.memory) {
       const std::vector<int64_t> peaks = MeasureCpuMemoryInChild([&] {
         MapLargeAllocations();
         for_each_row("memory of", measure_memory);
@@ -633,12 +651,19 @@ int main(int argc, char** argv) {
         return out;
       });
       for (size_t i = 0; i < rows.size() && i < peaks.size(); ++i) rows[i].m.peak_bytes = peaks[i];
-    } else {
+    } else if (o.memory) {
       for_each_row("memory of", measure_memory);
     }
     // Timings with the allocator as the programs set it (after the memory
     // child, which maps its large buffers separately instead).
-    if (device.is_cpu()) dispmvs::model::KeepFreedTensorMemory();
+    if (device.is_cpu()) {
+      dispmvs::model::KeepFreedTensorMemory();
+      if (o.block_cache_mb > 0) {
+        dispmvs::model::LargeBlockCacheOptions cache;
+        cache.max_cached_bytes = static_cast<std::size_t>(o.block_cache_mb) << 20;
+        dispmvs::model::InstallLargeBlockCache(cache);
+      }
+    }
     for_each_row("timing", [&](DispMvsNet& net, const DispMvsInput& input, Row& row) {
       const int64_t peak = row.m.peak_bytes;
       row.m = MeasureTime(net, input, o, device);
@@ -650,7 +675,11 @@ int main(int argc, char** argv) {
                 o.refine ? " + photometric refinement" : "", device.str().c_str(), static_cast<long long>(o.sources),
                 static_cast<long long>(o.warmup), static_cast<long long>(o.reps),
                 static_cast<long long>(o.reps), TORCH_VERSION);
-    std::printf("peak memory: %s\n\n", PeakMemoryProbe(device).method());
+    std::printf("peak memory: %s; large tensor blocks: %s\n\n",
+                o.memory ? PeakMemoryProbe(device).method() : "not measured (--memory 0)",
+                !device.is_cpu()            ? "the device's allocator"
+                : o.block_cache_mb > 0 ? ("kept for reuse, budget " + std::to_string(o.block_cache_mb) + " MiB").c_str()
+                                       : "mapped afresh by glibc (--block_cache_mb 0)");
     std::printf("| config | precision | params | iters | size | threads | median s | min s | peak MiB |");
     for (size_t s = 0; s < kNumNetStages; ++s) {
       std::printf(" %s |", NetStageName(static_cast<NetStage>(s)));

@@ -14,6 +14,7 @@
 #include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/host_allocator.h"
+#include "model/large_block_cache.h"
 #include "model/photometric_refinement.h"
 #include "model/safetensors.h"
 
@@ -21,15 +22,14 @@ namespace dispmvs::dense {
 
 namespace {
 
-// [3,H,W] float tensor of an RGB CV_32FC3 image.
-torch::Tensor ImageTensor(const cv::Mat& image) {
+// Copies an RGB CV_32FC3 image into `out` [3,H,W] (channels first).
+void CopyImage(const cv::Mat& image, torch::Tensor out) {
   if (image.type() != CV_32FC3 || !image.isContinuous()) {
     throw std::invalid_argument("DepthEstimator: images must be continuous CV_32FC3");
   }
-  return torch::from_blob(const_cast<float*>(image.ptr<float>()), {image.rows, image.cols, 3},
-                          torch::kFloat32)
-      .permute({2, 0, 1})
-      .clone();
+  out.copy_(torch::from_blob(const_cast<float*>(image.ptr<float>()), {image.rows, image.cols, 3},
+                             torch::kFloat32)
+                .permute({2, 0, 1}));
 }
 
 torch::Tensor MatrixTensor(const Eigen::Matrix3d& K) {
@@ -75,6 +75,7 @@ void EstimatorOptions::Check() const {
     throw std::invalid_argument("--coarse_iterations and --fine_iterations must be >= 0");
   }
   if (feature_cache_mb < 0) throw std::invalid_argument("--feature_cache_mb must be >= 0");
+  if (tensor_cache_mb < 0) throw std::invalid_argument("--tensor_cache_mb must be >= 0");
   model::ParseRefinementMode(refinement, "--refinement");
   if (confidence != "model" && confidence != "network") {
     throw std::invalid_argument("--confidence must be model or network, got '" + confidence + "'");
@@ -107,7 +108,16 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   options.Check();
   impl_->device = model::ParseUsableDevice(options.device, "--device");
   impl_->precision = model::ResolvePrecision(options.precision, impl_->device, "--precision");
-  if (impl_->device.is_cpu()) model::KeepFreedTensorMemory();
+  if (impl_->device.is_cpu()) {
+    model::KeepFreedTensorMemory();
+    // Maps of 32 MiB and more (from about 2 megapixels) reused instead of
+    // mapped afresh by glibc on every use (model/large_block_cache.h).
+    if (options.tensor_cache_mb > 0) {
+      model::LargeBlockCacheOptions cache;
+      cache.max_cached_bytes = static_cast<std::size_t>(options.tensor_cache_mb) << 20;
+      model::InstallLargeBlockCache(cache);
+    }
+  }
   impl_->features =
       std::make_unique<FeatureCache>(static_cast<std::size_t>(options.feature_cache_mb) << 20);
   const int threads = options.threads > 0
@@ -188,18 +198,25 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
         "(init = match)");
   }
   const cv::Size size = views[0].image.size();
-  std::vector<torch::Tensor> images, intrinsics, extrinsics;
-  for (const ProblemView& view : views) {
+  // The views' images written straight into the network's input: one copy
+  // of them, not one per image and one stacked (at 24 megapixels and five
+  // views each copy is 1.4 GB).
+  torch::Tensor images = torch::empty(
+      {1, static_cast<int64_t>(views.size()), 3, size.height, size.width}, torch::kFloat32);
+  std::vector<torch::Tensor> intrinsics, extrinsics;
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    const ProblemView& view = views[v];
     if (view.image.size() != size) {
       throw std::invalid_argument("DepthEstimator: all views must have the reference's size");
     }
-    images.push_back(ImageTensor(view.image));
+    CopyImage(view.image, images[0][static_cast<int64_t>(v)]);
     intrinsics.push_back(MatrixTensor(view.K));
     extrinsics.push_back(PoseTensor(view.R, view.t));
   }
   const auto float_on_device = torch::TensorOptions().dtype(torch::kFloat32).device(impl_->device);
   model::DispMvsInput input;
-  input.images = torch::stack(images).unsqueeze(0).to(float_on_device);
+  input.images = images.to(float_on_device);
+  images = torch::Tensor();  // on a GPU, the host copy goes now
   input.intrinsics = torch::stack(intrinsics).unsqueeze(0).to(float_on_device);
   input.extrinsics = torch::stack(extrinsics).unsqueeze(0).to(float_on_device);
   // Without a hint the range tensors stay undefined: the network's "no depth

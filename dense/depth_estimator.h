@@ -36,6 +36,11 @@ struct EstimatorOptions {
   // image that is the source of several references is encoded once), MiB;
   // 0 = encode every view of every problem.
   int feature_cache_mb = 256;
+  // On the CPU: budget of freed tensor blocks of 32 MiB and more kept for
+  // reuse, MiB (model/large_block_cache.h); 0 = none kept, every such block
+  // mapped afresh by the C library (several times slower above about 2
+  // megapixels).
+  int tensor_cache_mb = 512;
   // What follows the network: "ncc", a short search along the epipolar lines
   // around its depth scored by normalised cross-correlation of the images
   // (model/photometric_refinement.h), or "none", the network's depth as it is

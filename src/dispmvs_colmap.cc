@@ -287,6 +287,11 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "MiB of encoder features kept across reference views, so an image that is a "
        "source of several references is encoded once (about 4 MiB per image at 640x512, "
        "25 MiB at 1600x1152); 0 = encode every view of every reference.")
+      ("tensor_cache_mb", po::value<int>(&o.photometric.estimator.tensor_cache_mb)
+           ->default_value(o.photometric.estimator.tensor_cache_mb),
+       "On the CPU: MiB of freed network maps of 32 MiB and more kept for reuse (from "
+       "about 2 megapixels the maps are that large); 0 = none kept, each mapped afresh by "
+       "the C library, several times slower at 3 megapixels and more.")
       ("device", po::value<std::string>(&o.photometric.estimator.device)
            ->default_value(o.photometric.estimator.device),
        "cpu, cuda or cuda:<gpu index> (needs a CUDA build of LibTorch).")
