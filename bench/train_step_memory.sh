@@ -2,7 +2,7 @@
 # Training step time against resident memory: dispmvs_train's default (every
 # freed block kept in the C heap for the next step) and --low_memory 1 (freed
 # blocks above 32 MiB returned to the system, glibc's default), run
-# alternately in one session so that both see the same machine.
+# alternately in one sitting so that both see the same machine.
 #
 #   bench/train_step_memory.sh BUILD_DIR OUT_DIR [options] [-- TRAIN_OPTIONS...]
 #     --rounds R        alternations (default 2: default, low, default, low)

@@ -28,7 +28,7 @@ struct PhotometricRefinementOptions {
   double min_ncc = 0.2;       // the best score needed to replace the network's depth
   // The reference window's grey-value standard deviation needed (images in
   // [0, 1]). 0.005 (about 1.3 grey levels of an 8-bit image) since the
-  // seventh session, 0.01 before: fine real texture such as carpet varies
+  // seventh revision, 0.01 before: fine real texture such as carpet varies
   // by less than 0.01 over 7x7 pixels and still correlates (realval's MVS
   // pairs within 2 % 0.581 against 0.577, mvs_001 0.621 against 0.560; the
   // 20 generated scenes 0.5077 against 0.5050; docs/dense.md).
