@@ -14,7 +14,6 @@
 #include "model/device.h"
 #include "model/dispmvs_net.h"
 #include "model/host_allocator.h"
-#include "model/large_block_cache.h"
 #include "model/photometric_refinement.h"
 #include "model/safetensors.h"
 

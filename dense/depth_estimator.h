@@ -15,6 +15,7 @@
 
 #include "colmap_io/dense_array.h"
 #include "colmap_io/depth_range.h"
+#include "model/large_block_cache.h"
 #include "model/photometric_refinement_options.h"
 
 namespace dispmvs::dense {
@@ -40,7 +41,7 @@ struct EstimatorOptions {
   // reuse, MiB (model/large_block_cache.h); 0 = none kept, every such block
   // mapped afresh by the C library (several times slower above about 2
   // megapixels).
-  int tensor_cache_mb = 512;
+  int tensor_cache_mb = static_cast<int>(model::LargeBlockCacheOptions{}.max_cached_bytes >> 20);
   // What follows the network: "ncc", a short search along the epipolar lines
   // around its depth scored by normalised cross-correlation of the images
   // (model/photometric_refinement.h), or "none", the network's depth as it is
