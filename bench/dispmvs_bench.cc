@@ -4,7 +4,7 @@
 //   dispmvs_bench [--sizes 640x512,1600x1152] [--sources 5] [--config small,paper]
 //                 [--precision fp32,bf16] [--coarse_iterations N] [--fine_iterations N] [--device cpu|cuda[:i]]
 //                 [--threads 1,2] [--warmup 1] [--reps 3] [--refinement none|ncc]
-//                 [--memory 1|0] [--block_cache_mb MB]
+//                 [--memory 1|0] [--block_cache_mb MB] [--band_megapixels MP]
 //
 // Random weights and images: the cost of a pass does not depend on their
 // values (the network has no data-dependent control flow). For every
@@ -64,6 +64,7 @@
 #include "model/device.h"
 #include "src/program_main.h"
 #include "model/dispmvs_net.h"
+#include "model/fine_stage_bands.h"
 #include "model/host_allocator.h"
 #include "model/large_block_cache.h"
 #include "model/photometric_refinement.h"
@@ -100,6 +101,7 @@ struct Options {
   bool refine = false;  // --refinement ncc
   bool memory = true;   // --memory 0: no peak-memory child
   int64_t block_cache_mb = static_cast<int64_t>(dispmvs::model::LargeBlockCacheOptions{}.max_cached_bytes >> 20);
+  double band_megapixels = dispmvs::model::kDefaultBandMegapixels;  // --band_megapixels
   dispmvs::model::PhotometricRefinementOptions refinement;  // --refine_propagation_rounds, _levels
 };
 
@@ -120,6 +122,8 @@ constexpr const char* kUsage =
     "  --warmup N               untimed passes first (default 1)\n"
     "  --reps N                 timed passes, and as many again for the breakdown (default 3)\n"
     "  --memory 1|0             measure each row's peak memory first, in a child process (1)\n"
+    "  --band_megapixels MP     the fine stage in bands of rows of about MP megapixels each,\n"
+    "                           as dispmvs_colmap runs it; 0 = the whole image (BAND)\n"
     "  --block_cache_mb MB      budget of kept large tensor blocks for the timings, 0 = no\n"
     "                           cache: glibc maps every block of 32 MiB and more afresh\n"
     "                           (model/large_block_cache.h) (BLOCKCACHE)\n"
@@ -177,6 +181,9 @@ std::string Usage() {
   std::ostringstream trusted;
   trusted << "(" << defaults.trusted_plane_min_ncc << ")";
   usage.replace(usage.find("(TRUSTED)"), 9, trusted.str());
+  std::ostringstream band;
+  band << "(" << dispmvs::model::kDefaultBandMegapixels << ")";
+  usage.replace(usage.find("(BAND)"), 6, band.str());
   std::ostringstream local_change;
   local_change << "(" << defaults.local_plane_max_change << ")";
   usage.replace(usage.find("(LOCALCHANGE)"), 13, local_change.str());
@@ -278,6 +285,16 @@ Options ParseArgs(int argc, char** argv) {
       o.refine = value == "ncc";
     } else if (flag == "--memory") {
       o.memory = ParseInteger(flag, value, 0, 1) == 1;
+    } else if (flag == "--band_megapixels") {
+      size_t used = 0;
+      try {
+        o.band_megapixels = std::stod(value, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (value.empty() || used != value.size() || !(o.band_megapixels >= 0 && o.band_megapixels <= 1e4)) {
+        throw std::invalid_argument("--band_megapixels must be a number in [0, 10000], got '" + value + "'");
+      }
     } else if (flag == "--block_cache_mb") {
       o.block_cache_mb = ParseInteger(flag, value, 0, int64_t{1} << 20);
     } else if (flag == "--refine_steps") {
@@ -615,6 +632,7 @@ int main(int argc, char** argv) {
       for (const std::string& name : o.configs) {
         DispMvsNet net(MakeConfig(name, o));
         net->eval();
+        net->set_fine_band_pixels(static_cast<int64_t>(o.band_megapixels * 1e6));
         net->to(device);
         for (const Precision precision : precisions) {
           net->set_precision(precision);

@@ -1,11 +1,13 @@
 #!/usr/bin/env bash
 # Time and memory of the dense step against the image size, with and without
-# the large-block cache (model/large_block_cache.h), alternated.
+# the large-block cache (model/large_block_cache.h) and the fine stage in
+# bands (--band_megapixels), alternated.
 #
-# For every size WxH (in order) and every cache budget (alternated within
-# the size, so both see the same state of the machine):
+# For every size WxH (in order) and every cache budget and band size
+# (alternated within the size, so all see the same state of the machine):
 #   network  dispmvs_bench --sizes WxH --sources 4 --config small_v2
-#            --precision P --warmup 1 --reps R --memory 0 --block_cache_mb C:
+#            --precision P --warmup 1 --reps R --memory 0 --block_cache_mb C
+#            --band_megapixels B:
 #            seconds per view of the forward pass (median), per megapixel,
 #            and the shares of the encoders and the GRU update
 #   program  (with --program) one generated workspace per size
@@ -14,16 +16,18 @@
 #            megapixels, not measured; its first image the reference, the
 #            other four its sources), then
 #            dispmvs_colmap --mode photometric --image_list (its first image)
-#            --overwrite --tensor_cache_mb C under GNU time: the view's
+#            --overwrite --tensor_cache_mb C --band_megapixels B under GNU
+#            time: the view's
 #            seconds as the program logs them (network + refinement +
 #            writing), per megapixel, and the process's peak resident set
-#            and whether its maps are bit for bit those of the first budget
+#            and whether its maps are bit for bit those of the size's first
+#            variant
 #   memory   (with --memory) dispmvs_bench's peak memory of a pass (live
 #            tensors, measured with glibc's mappings, so once per size)
 #
 # Usage: bench/resolution_bench.sh BUILD OUT [--sizes "640x480 1600x1200"]
-#            [--cache_mb "512 0"] [--precision auto] [--reps 1] [--program]
-#            [--memory] [--max_uncached_mp MP]
+#            [--cache_mb "512 0"] [--band_mp "4"] [--precision auto] [--reps 1]
+#            [--program] [--memory] [--max_uncached_mp MP]
 #   BUILD  a build folder with bench/dispmvs_bench (and, for --program,
 #          src/dispmvs_colmap and bench/dispmvs_make_large_workspace)
 #   OUT    output folder: resolution_bench.md (the table), the logs, and
@@ -41,6 +45,7 @@ main() {
   shift 2
   sizes="640x480 1600x1200 2000x1500 2400x1800 2835x2128 4000x3000 6000x4000"
   cache_mb="512 0"
+  band_mp=4
   precision=auto
   reps=1
   program=0
@@ -50,6 +55,7 @@ main() {
     case $1 in
       --sizes) sizes=$2; shift 2 ;;
       --cache_mb) cache_mb=$2; shift 2 ;;
+      --band_mp) band_mp=$2; shift 2 ;;
       --precision) precision=$2; shift 2 ;;
       --reps) reps=$2; shift 2 ;;
       --program) program=1; shift ;;
@@ -63,6 +69,9 @@ main() {
   done
   for c in $cache_mb; do
     [[ $c =~ ^[0-9]+$ ]] || { echo "error: --cache_mb: '$c' is not a whole number of MiB" >&2; exit 2; }
+  done
+  for b in $band_mp; do
+    [[ $b =~ ^[0-9]+([.][0-9]+)?$ ]] || { echo "error: --band_mp: '$b' is not a number of megapixels" >&2; exit 2; }
   done
   [[ $reps =~ ^[1-9][0-9]*$ ]] || { echo "error: --reps must be a positive integer" >&2; exit 2; }
 
@@ -80,7 +89,7 @@ main() {
   fi
   mkdir -p "$out"
   tsv=$out/resolution_bench.tsv
-  printf 'size\tmegapixels\tcache_mb\tnet_s\tnet_s_per_mp\tencoders_share\tupdate_share\tview_s\tview_s_per_mp\tpeak_rss_mib\tlive_peak_mib\n' >"$tsv"
+  printf 'size\tmegapixels\tcache_mb\tband_mp\tnet_s\tnet_s_per_mp\tencoders_share\tupdate_share\tview_s\tview_s_per_mp\tpeak_rss_mib\tlive_peak_mib\n' >"$tsv"
   rows=()
 
   for size in $sizes; do
@@ -109,15 +118,18 @@ main() {
       { echo "${names[0]}"; (IFS=,; echo "${names[*]:1}" | sed 's/,/, /g'); } >"$scene/stereo/patch-match.cfg"
       echo "${names[0]}" >"$out/image_list_$size.txt"
     fi
-    for c in $cache_mb; do
+    for variant in $(for c in $cache_mb; do for b in $band_mp; do echo "$c/$b"; done; done); do
+      c=${variant%/*}
+      band=${variant#*/}
       if [[ $c -eq 0 ]] && awk -v m="$mp" -v x="$max_uncached_mp" 'BEGIN { exit !(m > x) }'; then
         echo "== $size: without the cache skipped (above $max_uncached_mp MP)" >&2
         continue
       fi
-      echo "== $size: network, cache $c MiB" >&2
-      log=$out/net_${size}_cache$c.log
+      echo "== $size: network, cache $c MiB, bands of $band MP" >&2
+      log=$out/net_${size}_cache${c}_band$band.log
       "$bench" --sizes "$size" --sources 4 --config small_v2 --precision "$precision" \
-        --warmup 1 --reps "$reps" --memory 0 --block_cache_mb "$c" >"$log" 2>&1 ||
+        --warmup 1 --reps "$reps" --memory 0 --block_cache_mb "$c" \
+        --band_megapixels "$band" >"$log" 2>&1 ||
         { tail -n 20 "$log" >&2; exit 1; }
       # | config | precision | params | iters | size | threads | median s | min s | peak MiB |
       #   encoders | correlation | update | ...
@@ -129,18 +141,20 @@ main() {
       peak=n/a
       same=n/a
       if [[ $program -eq 1 ]]; then
-        echo "== $size: dispmvs_colmap, cache $c MiB" >&2
-        log=$out/colmap_${size}_cache$c.log
+        echo "== $size: dispmvs_colmap, cache $c MiB, bands of $band MP" >&2
+        log=$out/colmap_${size}_cache${c}_band$band.log
         /usr/bin/time -f '%e %M' -o "$log.time" "$colmap" --workspace_path "$scene" \
           --mode photometric --image_list "$out/image_list_$size.txt" --overwrite \
-          --tensor_cache_mb "$c" >"$log" 2>&1 || { tail -n 20 "$log" >&2; exit 1; }
+          --tensor_cache_mb "$c" --band_megapixels "$band" >"$log" 2>&1 || { tail -n 20 "$log" >&2; exit 1; }
         # photometric: [1/1] NAME (4 sources): 12.3 s, WxH, ...
         view_s=$(sed -n 's/^photometric: \[1\/1\] .*: \([0-9.]*\) s, [0-9]*x[0-9]*, .*/\1/p' "$log" | head -n 1)
         [[ -n $view_s ]] || { echo "error: no view time in $log" >&2; exit 1; }
         view_per_mp=$(awk -v s="$view_s" -v m="$mp" 'BEGIN { printf "%.2f", s / m }')
         peak=$(tail -n 1 "$log.time" | awk '{ printf "%.0f", $2 / 1024 }')
-        # The maps of every budget must be the same bits (the cache changes
-        # where memory comes from, not the arithmetic).
+        # The maps of every variant must be the same bits: the cache changes
+        # where memory comes from, not the arithmetic, and the bands run the
+        # same arithmetic on the same values (in bf16; in fp32 a convolution
+        # of another height may round differently).
         sums=$(cd "$scene/stereo" && find depth_maps normal_maps confidence_maps -type f -name '*.photometric.bin' \
           | sort | xargs md5sum)
         if [[ -z ${reference_sums:-} ]]; then
@@ -152,9 +166,9 @@ main() {
           same=NO
         fi
       fi
-      printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$size" "$mp" "$c" "$net_s" "$net_per_mp" \
+      printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$size" "$mp" "$c" "$band" "$net_s" "$net_per_mp" \
         "$encoders" "$update" "$view_s" "$view_per_mp" "$peak" "$live_peak" >>"$tsv"
-      rows+=("| $size | $mp | $c | $net_s | $net_per_mp | $encoders % | $update % | $view_s | $view_per_mp | $peak | $live_peak | $same |")
+      rows+=("| $size | $mp | $c | $band | $net_s | $net_per_mp | $encoders % | $update % | $view_s | $view_per_mp | $peak | $live_peak | $same |")
       echo "${rows[-1]}" >&2
     done
     [[ $program -eq 0 ]] || rm -rf "$ws"
@@ -163,21 +177,22 @@ main() {
   {
     echo "# Time and memory against the image size"
     echo
-    echo "Command: \`bench/resolution_bench.sh $build $out --sizes \"$sizes\" --cache_mb \"$cache_mb\" --precision $precision --reps $reps$([[ $program -eq 1 ]] && echo ' --program')$([[ $memory -eq 1 ]] && echo ' --memory')\`"
+    echo "Command: \`bench/resolution_bench.sh $build $out --sizes \"$sizes\" --cache_mb \"$cache_mb\" --band_mp \"$band_mp\" --precision $precision --reps $reps$([[ $program -eq 1 ]] && echo ' --program')$([[ $memory -eq 1 ]] && echo ' --memory')\`"
     echo
     echo "Machine: $(nproc) CPU(s), $(grep -m1 'model name' /proc/cpuinfo 2>/dev/null | cut -d: -f2- | sed 's/^ *//' || echo unknown CPU),"
     echo "$(awk '/MemTotal/ { printf "%.1f GiB", $2 / 1048576 }' /proc/meminfo 2>/dev/null) memory; $(date -u '+%Y-%m-%d %H:%M UTC')."
     echo
     echo "Network: one forward pass, N = 4 sources, small_v2, random weights and images, after one"
     echo "warm-up pass (median of $reps). Cache: the budget of freed tensor blocks of 32 MiB and more"
-    echo "kept for reuse (0: glibc maps each afresh). View: dispmvs_colmap's own time for one view"
+    echo "kept for reuse (0: glibc maps each afresh). Band MP: the fine stage in bands of rows of"
+    echo "about that many megapixels (0: the whole image). View: dispmvs_colmap's own time for one view"
     echo "of a generated workspace (network, refinement, writing the maps), and the whole"
     echo "process's peak RSS. Live peak: the largest growth of the live tensors during a pass"
     echo "(dispmvs_bench's memory measurement). Same maps: the view's depth, normal and confidence"
-    echo "maps bit for bit those of the size's first budget (reference)."
+    echo "maps bit for bit those of the size's first variant (reference)."
     echo
-    echo "| size | MP | cache MiB | network s | network s/MP | encoders | update | view s | view s/MP | peak RSS MiB | live peak MiB | same maps |"
-    echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    echo "| size | MP | cache MiB | band MP | network s | network s/MP | encoders | update | view s | view s/MP | peak RSS MiB | live peak MiB | same maps |"
+    echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     printf '%s\n' "${rows[@]}"
   } >"$out/resolution_bench.md"
   echo "wrote $out/resolution_bench.md and $tsv" >&2

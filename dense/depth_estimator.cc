@@ -75,6 +75,9 @@ void EstimatorOptions::Check() const {
   }
   if (feature_cache_mb < 0) throw std::invalid_argument("--feature_cache_mb must be >= 0");
   if (tensor_cache_mb < 0) throw std::invalid_argument("--tensor_cache_mb must be >= 0");
+  if (!(band_megapixels >= 0) || !std::isfinite(band_megapixels)) {
+    throw std::invalid_argument("--band_megapixels must be a number >= 0 (0 = never in bands)");
+  }
   model::ParseRefinementMode(refinement, "--refinement");
   if (confidence != "model" && confidence != "network") {
     throw std::invalid_argument("--confidence must be model or network, got '" + confidence + "'");
@@ -141,6 +144,7 @@ DepthEstimator::DepthEstimator(const EstimatorOptions& options) : impl_(std::mak
   impl_->net->to(impl_->device);
   impl_->net->eval();
   impl_->net->set_precision(impl_->precision);
+  impl_->net->set_fine_band_pixels(static_cast<int64_t>(options.band_megapixels * 1e6));
   impl_->refine = model::ParseRefinementMode(options.refinement, "--refinement");
   impl_->refinement = options.refinement_options;
   impl_->fill = options.fill_options;
@@ -182,9 +186,12 @@ DepthEstimator::EncoderUse DepthEstimator::encoder_use() const {
   return use;
 }
 
-DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
+DepthEstimate DepthEstimator::Estimate(std::vector<ProblemView> views,
                                        const std::optional<colmap_io::DepthRange>& hint,
-                                       uint64_t seed) {
+                                       uint64_t seed, const StepCallback& step) {
+  const auto begin = [&](const char* name) {
+    if (step) step(name);
+  };
   if (views.size() < 2) throw std::invalid_argument("DepthEstimator: need a reference and a source");
   if (hint && (!hint->valid || !(hint->d_min > 0) || !(hint->d_min < hint->d_max) ||
                !std::isfinite(hint->d_max))) {
@@ -203,12 +210,15 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
   torch::Tensor images = torch::empty(
       {1, static_cast<int64_t>(views.size()), 3, size.height, size.width}, torch::kFloat32);
   std::vector<torch::Tensor> intrinsics, extrinsics;
-  for (std::size_t v = 0; v < views.size(); ++v) {
-    const ProblemView& view = views[v];
+  for (const ProblemView& view : views) {
     if (view.image.size() != size) {
       throw std::invalid_argument("DepthEstimator: all views must have the reference's size");
     }
+  }
+  for (std::size_t v = 0; v < views.size(); ++v) {
+    ProblemView& view = views[v];
     CopyImage(view.image, images[0][static_cast<int64_t>(v)]);
+    view.image.release();  // the pixels go now unless the caller kept them
     intrinsics.push_back(MatrixTensor(view.K));
     extrinsics.push_back(PoseTensor(view.R, view.t));
   }
@@ -227,26 +237,40 @@ DepthEstimate DepthEstimator::Estimate(const std::vector<ProblemView>& views,
   }
 
   torch::NoGradGuard no_grad;
+  begin("encoders");
   // Each view's matching features, encoded alone (as forward() would), so a
-  // reused one gives the same bits as a fresh one.
-  std::vector<torch::Tensor> coarse, fine;
+  // reused one gives the same bits as a fresh one, and written straight into
+  // the network's [V,C,h,w] input: a view's own tensor goes as soon as it is
+  // copied (unless the feature cache keeps it).
   for (std::size_t v = 0; v < views.size(); ++v) {
     const auto encode = [&] { return impl_->net->EncodeMatching(input.images[0][v].unsqueeze(0)); };
     const model::FeaturePyramid features =
         views[v].image_id >= 0
             ? impl_->features->Get({views[v].image_id, size.width, size.height}, encode)
             : encode();
-    coarse.push_back(features.coarse);
-    fine.push_back(features.fine);
+    if (v == 0) {
+      const auto all_views = [&](const torch::Tensor& one) {
+        std::vector<int64_t> shape = one.sizes().vec();
+        shape[0] = static_cast<int64_t>(views.size());
+        return torch::empty(shape, one.options());
+      };
+      input.matching_features = {all_views(features.coarse), all_views(features.fine)};
+    }
+    input.matching_features.coarse.narrow(0, static_cast<int64_t>(v), 1).copy_(features.coarse);
+    input.matching_features.fine.narrow(0, static_cast<int64_t>(v), 1).copy_(features.fine);
   }
-  input.matching_features = {torch::cat(coarse, 0), torch::cat(fine, 0)};
   // The initialisation is drawn on the CPU and moved, so CPU and CUDA runs
   // start from the same random depths.
+  begin("network");
   const model::DispMvsOutput output =
       impl_->net->forward(input, at::make_generator<at::CPUGeneratorImpl>(seed));
+  // The refinement reads the images and the network's maps, not the
+  // features: they go before its own maps are allocated.
+  input.matching_features = {};
   torch::Tensor depth = output.depth;
   torch::Tensor confidence = output.confidence;
   if (impl_->refine) {
+    begin("refinement");
     const model::PhotometricRefinement refined = model::RefineDepthPhotometrically(input, output, impl_->refinement);
     depth = refined.depth;
     if (UsesConfidenceModel()) {

@@ -5,6 +5,7 @@
 // into COLMAP dense arrays. LibTorch stays behind this interface.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -15,6 +16,7 @@
 
 #include "colmap_io/dense_array.h"
 #include "colmap_io/depth_range.h"
+#include "model/fine_stage_bands.h"
 #include "model/large_block_cache.h"
 #include "model/photometric_refinement_options.h"
 
@@ -42,6 +44,11 @@ struct EstimatorOptions {
   // mapped afresh by the C library (several times slower above about 2
   // megapixels).
   int tensor_cache_mb = static_cast<int>(model::LargeBlockCacheOptions{}.max_cached_bytes >> 20);
+  // The network's fine stage in bands of rows of about this many megapixels
+  // each, halos included (DispMvsNet::set_fine_band_pixels): less memory at
+  // large sizes for a little more time; an image smaller than one band runs
+  // whole, as with 0 (never in bands).
+  double band_megapixels = model::kDefaultBandMegapixels;
   // What follows the network: "ncc", a short search along the epipolar lines
   // around its depth scored by normalised cross-correlation of the images
   // (model/photometric_refinement.h), or "none", the network's depth as it is
@@ -103,9 +110,17 @@ class DepthEstimator {
   // the network gets no depth range, which model v2 weights (init = match)
   // accept; weights that need one (NeedsDepthRange()) throw
   // std::invalid_argument naming --depth_min. Non-finite network outputs
-  // read as "no depth".
-  DepthEstimate Estimate(const std::vector<ProblemView>& views,
-                         const std::optional<colmap_io::DepthRange>& hint, uint64_t seed);
+  // read as "no depth". `views` is taken by value and each image released
+  // once copied into the network's input: a caller that moves its views in
+  // does not hold a second copy of the pixels through the estimate (five
+  // float images of 24 megapixels are 1.4 GB); one that copies them (cv::Mat
+  // shares its pixels) keeps them.
+  // `step`, if set, is called as each step begins ("encoders", "network",
+  // "refinement"), so that a caller can say what a long view is doing.
+  using StepCallback = std::function<void(const std::string& step)>;
+  DepthEstimate Estimate(std::vector<ProblemView> views,
+                         const std::optional<colmap_io::DepthRange>& hint, uint64_t seed,
+                         const StepCallback& step = {});
 
   // Whether the loaded weights need a depth-range hint (the paper's random
   // initialisation) or not (model v2's initialisation from matches).

@@ -7,6 +7,7 @@
 #include <set>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "colmap_io/atomic_file.h"
@@ -20,6 +21,14 @@
 namespace dispmvs::dense {
 
 using namespace colmap_io;
+
+namespace {
+
+// Views of this many pixels and more say which step they are in (each takes
+// a minute or more at 4 megapixels on two cores).
+constexpr std::size_t kStepsFromPixels = 4'000'000;
+
+}  // namespace
 
 // The image-th number of the SplitMix64 stream that starts at the run's seed.
 uint64_t ViewSeed(uint64_t seed, image_t image_id) {
@@ -141,12 +150,35 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       // model v2 weights (checked above for the others).
       const std::optional<DepthRange> hint = plan.HintFor(reference);
       ProblemViews loaded;
+      std::size_t num_views = 0;
       DepthEstimate estimate;
       try {
         loaded = LoadProblemViews(workspace, plan, problem, options.max_image_size);
-        estimate = estimator.Estimate(loaded.views, hint, ViewSeed(options.seed, reference));
-        WriteMaps(paths, estimate.depth, fusion::NormalMapFromDepth(estimate.depth, loaded.views[0].K),
+        num_views = loaded.views.size();
+        const Eigen::Matrix3d K_reference = loaded.views[0].K;
+        // A large view takes a minute or more: its line says which step it
+        // is in, and how long each took ("..., reading images 3.6 s,
+        // encoders 4.3 s, network 14.6 s, refinement 10.4 s, writing 0.2 s:
+        // 33.0 s, ..."). Smaller views keep one short line.
+        const bool say_steps = loaded.views[0].image.total() >= kStepsFromPixels;
+        std::optional<Clock::time_point> step_start;
+        if (say_steps) {
+          log << ", reading images";  // the first step, already done
+          step_start = view_start;
+        }
+        const auto step = [&](const std::string& name) {
+          if (!say_steps) return;
+          if (step_start) log << ' ' << FormatSeconds(SecondsSince(*step_start));
+          log << ", " << name << std::flush;
+          step_start = Clock::now();
+        };
+        // The pixels move into the estimate, which frees each image once it
+        // is in the network's input.
+        estimate = estimator.Estimate(std::move(loaded.views), hint, ViewSeed(options.seed, reference), step);
+        step("writing");
+        WriteMaps(paths, estimate.depth, fusion::NormalMapFromDepth(estimate.depth, K_reference),
                   estimate.confidence);
+        if (step_start) log << ' ' << FormatSeconds(SecondsSince(*step_start));
       } catch (const std::exception& error) {
         // Still holding the claim: say why, for the report and dispmvs_eval.
         // Best effort (the disk may be what failed); the error goes on.
@@ -158,14 +190,13 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
         }
         throw;
       }
-      const std::vector<ProblemView>& views = loaded.views;
       // For the run report; after the maps, so a complete view never waits
       // on it (a view killed in between just has no time in the report).
       ViewRecord record;
       record.seconds = SecondsSince(view_start);
       record.width = estimate.depth.width();
       record.height = estimate.depth.height();
-      record.num_sources = static_cast<int>(views.size()) - 1;
+      record.num_sources = static_cast<int>(num_views) - 1;
       record.device = options.estimator.device;
       std::string record_note;
       try {  // only the report needs it: not a reason to fail the view
@@ -176,7 +207,7 @@ PassSummary RunPhotometricPass(const Workspace& workspace, const DensePlan& plan
       ++summary.done;
       const double per_view = SecondsSince(compute_start) / static_cast<double>(i + 1);
       log << ": " << FormatSeconds(record.seconds) << ", "
-          << views[0].image.cols << "x" << views[0].image.rows << ", depth at "
+          << estimate.depth.width() << "x" << estimate.depth.height() << ", depth at "
           << Percent(ValidFraction(estimate.depth)) << " of pixels, ETA "
           << FormatDuration(per_view * static_cast<double>(todo.size() - i - 1)) << record_note;
       if (leftovers > 0) {

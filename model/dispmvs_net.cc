@@ -222,6 +222,9 @@ struct StageInput {
   bool keep_matching = false;  // fill StageResult::matching
   // Fallback start where no source matched, per sample [B] (undefined: 1).
   torch::Tensor hint_inv_depth;
+  // The stage's maps are the rows first_row.. of the image's stage grid (a
+  // band of the fine stage); 0: all of it.
+  int64_t first_row = 0;
 };
 
 struct StageResult {
@@ -296,7 +299,7 @@ StageSetup SetUpStage(const StageInput& in, StageTimer* timer) {
   {
     const StageTimer::Section geometry(timer, NetStage::kGeometry);
     setup.pair = MakeEpipolarPair(stage_intrinsics(in.K_ref), stage_intrinsics(in.K_src), in.R,
-                                  in.T, h, w);
+                                  in.T, h, w, in.first_row);
     setup.direction = ComputeEpipolarDirection(setup.pair);
     if (in.use_segment_volume) {
       segment = ComputeEpipolarSegment(setup.pair, in.src_features.size(2), in.src_features.size(3));
@@ -391,9 +394,11 @@ FeaturePyramid EncodeOneByOne(MatchingEncoder& encoder, const torch::Tensor& pad
   return {torch::cat(coarse, 0), torch::cat(fine, 0)};
 }
 
-void CheckMatchingFeatures(const FeaturePyramid& features, const torch::Tensor& padded,
+// `padded` [B',3,H',W']: padded images of the batch's references at least
+// (for the size, device and type); `views` = B*V.
+void CheckMatchingFeatures(const FeaturePyramid& features, int64_t views, const torch::Tensor& padded,
                            const ModelConfig& config) {
-  const int64_t views = padded.size(0), height = padded.size(2), width = padded.size(3);
+  const int64_t height = padded.size(2), width = padded.size(3);
   auto check = [&](const torch::Tensor& t, int64_t channels, int64_t stride, const char* name) {
     if (!t.defined() || t.dim() != 4 || t.size(0) != views || t.size(1) != channels ||
         t.size(2) != height / stride || t.size(3) != width / stride ||
@@ -540,6 +545,27 @@ StageInput ForStage(const StageInput& shared, const StageSizes& sizes, const tor
   return stage;
 }
 
+// The last fine iteration's maps at full resolution (not cropped): the
+// fused inverse depth (0 where invalid), its validity, the depth and the
+// confidence, all [B,1,4h,4w].
+struct FinalMaps {
+  torch::Tensor inv_depth, valid, depth, confidence;
+};
+FinalMaps UpsampleFinal(const MaskedMap& last, const torch::Tensor& mask_logits,
+                        const torch::Tensor& agreement) {
+  constexpr int64_t f = DispMvsNetImpl::kUpsampleFactor;
+  const MaskedMap final_map = ConvexUp(last, mask_logits, f);
+  FinalMaps out;
+  out.valid = final_map.valid;
+  out.inv_depth = torch::where(out.valid, final_map.value, torch::zeros({}, final_map.value.options()));
+  out.depth = torch::where(out.valid, 1.0 / torch::where(out.valid, out.inv_depth, torch::ones_like(out.inv_depth)),
+                           torch::zeros_like(out.inv_depth));
+  const MaskedMap confidence = ConvexUp(
+      MaskedMap{torch::where(last.valid, agreement, torch::zeros_like(agreement)), last.valid}, mask_logits, f);
+  out.confidence = torch::where(out.valid, confidence.value.clamp(0.0, 1.0), torch::zeros_like(out.inv_depth));
+  return out;
+}
+
 // The outputs at full resolution (cropped back to height x width) from both
 // stages' iterations: every iteration in training mode (for SequenceLoss),
 // else the last one only.
@@ -568,18 +594,71 @@ DispMvsOutput FullResolutionOutputs(const StageResult& coarse, const StageResult
     }
   }
   const auto& last = fine.iterations.back();
-  const MaskedMap final_map = ConvexUp(last.inv_depth, last.mask_logits, f);
-  out.valid = Crop(final_map.valid, height, width);
-  const torch::Tensor final_inv = finish(final_map);
-  out.inv_depths.push_back(final_inv);
-  out.depth = torch::where(out.valid, 1.0 / torch::where(out.valid, final_inv, torch::ones_like(final_inv)),
-                           torch::zeros_like(final_inv));
-  const MaskedMap confidence = ConvexUp(
-      MaskedMap{torch::where(last.inv_depth.valid, fine.agreement, torch::zeros_like(fine.agreement)),
-                last.inv_depth.valid},
-      last.mask_logits, f);
-  out.confidence = torch::where(out.valid, Crop(confidence.value, height, width).clamp(0.0, 1.0),
-                                torch::zeros_like(final_inv));
+  const FinalMaps final_maps = UpsampleFinal(last.inv_depth, last.mask_logits, fine.agreement);
+  out.valid = Crop(final_maps.valid, height, width);
+  out.inv_depths.push_back(Crop(final_maps.inv_depth, height, width));
+  out.depth = Crop(final_maps.depth, height, width);
+  out.confidence = Crop(final_maps.confidence, height, width);
+  return out;
+}
+
+// Fine-stage cells on either side of a band that its inner rows depend on,
+// for `iterations` GRU updates: each update reads its input state up to 11
+// cells away (motion encoder 5, separable GRU 4, heads 2), the context
+// terms 2 more, the mask head and the convex upsampling 1 each; 1 spare.
+int64_t FineBandHalo(int64_t iterations) { return 11 * iterations + 5; }
+
+// Inference: the fine stage and the final upsampling in bands of rows of the
+// fine grid, `band_rows` at a time, each run on its rows plus
+// FineBandHalo() rows on either side (the reference's features, context and
+// start narrowed, its epipolar geometry computed for those rows) and keeping
+// its own rows. The stage's maps then never exist for the whole image: at
+// 24 megapixels and four sources they would be about 6 GB. Outputs as
+// FullResolutionOutputs gives them in eval mode (cropped to height x width);
+// they agree with the whole-image pass to float rounding (the same
+// arithmetic on the same values; convolutions of maps of another height may
+// round differently), which dispmvs_net_test checks.
+DispMvsOutput FineStageInBands(const StageInput& fine, UpdateBlock& block, int64_t band_rows,
+                               int64_t height, int64_t width, StageTimer* timer) {
+  constexpr int64_t f = DispMvsNetImpl::kUpsampleFactor;
+  const int64_t h = fine.ref_features.size(2);
+  const int64_t halo = FineBandHalo(fine.iterations);
+  const torch::TensorOptions opts = fine.ref_features.options();
+  const int64_t b = fine.batch;
+  DispMvsOutput out;
+  torch::Tensor inv_depth = torch::zeros({b, 1, height, width}, opts);
+  out.valid = torch::zeros({b, 1, height, width}, opts.dtype(torch::kBool));
+  out.depth = torch::zeros({b, 1, height, width}, opts);
+  out.confidence = torch::zeros({b, 1, height, width}, opts);
+  for (int64_t r0 = 0; r0 < h; r0 += band_rows) {
+    const int64_t r1 = std::min(h, r0 + band_rows);
+    const int64_t lo = std::max<int64_t>(0, r0 - halo), hi = std::min(h, r1 + halo);
+    StageInput band = fine;
+    band.ref_features = fine.ref_features.narrow(2, lo, hi - lo);
+    band.context = fine.context.narrow(2, lo, hi - lo);
+    band.init_inv_depth = fine.init_inv_depth.narrow(2, lo, hi - lo);
+    band.first_row = lo;  // the same cameras, the band's pixel coordinates
+    const StageResult result = RunStage(band, block, timer);
+
+    // The band's rows and one more on either side (the convex upsampling's
+    // 3x3 neighbourhood), upsampled; their own full-resolution rows kept.
+    const StageTimer::Section upsampling(timer, NetStage::kUpsampling);
+    const int64_t k0 = std::max<int64_t>(0, r0 - 1), k1 = std::min(h, r1 + 1);
+    const auto keep = [&](const torch::Tensor& x) { return x.narrow(2, k0 - lo, k1 - k0); };
+    const auto& last = result.iterations.back();
+    const FinalMaps maps = UpsampleFinal(MaskedMap{keep(last.inv_depth.value), keep(last.inv_depth.valid)},
+                                         keep(last.mask_logits), keep(result.agreement));
+    const int64_t first = f * r0, rows = std::min(f * r1, height) - first;
+    if (rows <= 0) continue;  // padding rows only
+    const auto own = [&](const torch::Tensor& x) {
+      return x.narrow(2, first - f * k0, rows).narrow(3, 0, width);
+    };
+    inv_depth.narrow(2, first, rows).copy_(own(maps.inv_depth));
+    out.valid.narrow(2, first, rows).copy_(own(maps.valid));
+    out.depth.narrow(2, first, rows).copy_(own(maps.depth));
+    out.confidence.narrow(2, first, rows).copy_(own(maps.confidence));
+  }
+  out.inv_depths.push_back(inv_depth);
   return out;
 }
 
@@ -608,12 +687,17 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
   const int64_t b = input.images.size(0), v = input.images.size(1);
   StageTimer* const timer = stage_timer_;
 
-  const torch::Tensor images = PadViews(input.images, kCoarseStride);
+  // Given the matching features, only the references are encoded here (by
+  // the context encoder), so only they are padded: at 24 megapixels a padded
+  // copy of five views would be 1.4 GB.
+  const bool features_given = input.matching_features.coarse.defined();
+  const int64_t padded_views = features_given ? 1 : v;
+  const torch::Tensor images = PadViews(input.images.narrow(1, 0, padded_views), kCoarseStride);
   FeaturePyramid matching, context;
   {
     const StageTimer::Section encoders(timer, NetStage::kEncoders);
-    if (input.matching_features.coarse.defined()) {
-      CheckMatchingFeatures(input.matching_features, images, config_);
+    if (features_given) {
+      CheckMatchingFeatures(input.matching_features, b * v, images, config_);
       matching = input.matching_features;
     } else if (!torch::GradMode::is_enabled()) {
       matching = EncodeOneByOne(matching_encoder_, images);
@@ -621,7 +705,7 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
       matching = matching_encoder_->forward(images);
     }
     context = context_encoder_->forward(
-        images.view({b, v, 3, images.size(2), images.size(3)}).select(1, 0));
+        images.view({b, padded_views, 3, images.size(2), images.size(3)}).select(1, 0));
   }
   const StageInput shared = SharedStageInput(input, v2, is_training(), timer);
 
@@ -654,6 +738,16 @@ DispMvsOutput DispMvsNetImpl::forward(const DispMvsInput& input, torch::Generato
     fine_input.init_inv_depth =
         ConvexUpsample(coarse.state, coarse.iterations.back().mask_logits, kUpsampleFactor).detach();
   }
+  const int64_t fine_rows = fine_input.ref_features.size(2), fine_cols = fine_input.ref_features.size(3);
+  const int64_t halo = FineBandHalo(fine_input.iterations);
+  // Band rows: as many as fit in fine_band_pixels_ with their halo, at least
+  // as many as the halo (fewer would spend more on halos than on bands).
+  const int64_t band_rows =
+      std::max(halo, fine_band_pixels_ / (kFineStride * kFineStride) / std::max<int64_t>(fine_cols, 1) - 2 * halo);
+  if (fine_band_pixels_ > 0 && !is_training() && !torch::GradMode::is_enabled() && band_rows < fine_rows) {
+    return FineStageInBands(fine_input, fine_block_, band_rows, input.images.size(3), input.images.size(4),
+                            timer);
+  }
   const StageResult fine = RunStage(fine_input, fine_block_, timer);
 
   const StageTimer::Section upsampling(timer, NetStage::kUpsampling);
@@ -675,6 +769,11 @@ void DispMvsNetImpl::set_iterations(int64_t coarse, int64_t fine) {
   }
   config_.coarse_iterations = coarse;
   config_.fine_iterations = fine;
+}
+
+void DispMvsNetImpl::set_fine_band_pixels(int64_t pixels) {
+  if (pixels < 0) throw std::invalid_argument("DispMvsNet: fine_band_pixels must be >= 0");
+  fine_band_pixels_ = pixels;
 }
 
 void DispMvsNetImpl::set_precision(Precision precision) {

@@ -31,6 +31,7 @@
 
 #include "model/config.h"
 #include "model/encoder.h"
+#include "model/fine_stage_bands.h"
 #include "model/matching_loss.h"
 #include "model/precision.h"
 #include "model/stage_timer.h"
@@ -135,6 +136,19 @@ class DispMvsNetImpl : public torch::nn::Module {
   // inference. Throws std::invalid_argument unless both are >= 1.
   void set_iterations(int64_t coarse, int64_t fine);
 
+  // Inference (eval mode, no autograd): the fine stage and the final
+  // upsampling run in bands of rows, each about `pixels` full-resolution
+  // pixels with the rows its own ones depend on (FineBandHalo: 27 fine rows,
+  // 108 pixels, on either side for 2 fine iterations), whenever the image
+  // has more rows than one band. The fine stage's maps (hidden states,
+  // correlation, the GRU's, about 270 bytes per pixel with four sources) then
+  // never exist for the whole image; the cost is the halos' share of the
+  // fine stage's time. The outputs agree with a whole-image pass to float
+  // rounding. 0 (the default): the whole image at once. Throws
+  // std::invalid_argument if pixels < 0.
+  void set_fine_band_pixels(int64_t pixels);
+  int64_t fine_band_pixels() const { return fine_band_pixels_; }
+
   // The arithmetic of the GRU update blocks' convolutions in later passes
   // (precision.h; fp32 by default): in bf16 a pass is about a sixth faster
   // on a CPU with native bf16 (docs/benchmarks.md). The encoders, the correlation and the
@@ -154,6 +168,7 @@ class DispMvsNetImpl : public torch::nn::Module {
   UpdateBlock coarse_block_{nullptr};
   UpdateBlock fine_block_{nullptr};
   StageTimer* stage_timer_ = nullptr;
+  int64_t fine_band_pixels_ = 0;
 };
 TORCH_MODULE(DispMvsNet);
 

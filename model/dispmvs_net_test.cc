@@ -231,6 +231,44 @@ TEST(DispMvsNetInferenceTest, ChunkedInferenceMatchesTheBatchedPass) {
   EXPECT_TRUE(torch::equal(batched.valid, chunked.valid));
 }
 
+// The fine stage in bands of rows (set_fine_band_pixels) gives the
+// whole-image pass's maps to float rounding, in both cell conventions and
+// starts, with two samples. 250 rows pad to 256: a 64-row fine grid, bands
+// of the smallest height (the halo, 27 rows for two fine iterations) make
+// three (27, 27, 10), the last with the padding rows, and every band's
+// halo is cut by an image border or reaches past a neighbour band. A halo
+// smaller than the rows the updates read would differ by far more.
+TEST(DispMvsNetInferenceTest, FineStageInBandsMatchesTheWholeImage) {
+  for (const ModelConfig& config : {FastV2Config(), FastConfig()}) {
+    DispMvsNet net(config);
+    net->eval();
+    torch::NoGradGuard no_grad;
+    const DispMvsInput in = MakeInput(2, 2, 250, 60);
+    const auto run = [&](int64_t band_pixels) {
+      net->set_fine_band_pixels(band_pixels);
+      torch::Generator gen = at::make_generator<at::CPUGeneratorImpl>(5);
+      return net->forward(in, gen);
+    };
+    const DispMvsOutput whole = run(0);
+    const DispMvsOutput bands = run(1);
+    ASSERT_EQ(bands.depth.sizes(), whole.depth.sizes());
+    ASSERT_EQ(bands.inv_depths.size(), 1u);
+    EXPECT_TRUE(torch::equal(bands.valid, whole.valid)) << config.name;
+    EXPECT_GT(whole.valid.to(torch::kFloat).mean().item<double>(), 0.5) << config.name;
+    const auto relative = [](const torch::Tensor& x, const torch::Tensor& y) {
+      return ((x - y).abs() / y.abs().clamp_min(1e-6)).max().item<double>();
+    };
+    EXPECT_LT(relative(bands.depth, whole.depth), 1e-5) << config.name;
+    EXPECT_LT(relative(bands.inv_depths[0], whole.inv_depths.back()), 1e-5) << config.name;
+    EXPECT_LT((bands.confidence - whole.confidence).abs().max().item<double>(), 1e-5) << config.name;
+    // An image no taller than one band runs whole: the same bits.
+    const DispMvsOutput one_band = run(int64_t{1} << 30);
+    EXPECT_TRUE(torch::equal(one_band.depth, whole.depth)) << config.name;
+  }
+  DispMvsNet net(FastV2Config());
+  EXPECT_THROW(net->set_fine_band_pixels(-1), std::invalid_argument);
+}
+
 TEST(DispMvsNetV2Test, TrainingReturnsBothStagesMatchingAndTheLossReachesEveryParameter) {
   DispMvsNet net(FastV2Config());
   net->train();

@@ -159,11 +159,13 @@ EpipolarGradient ComputeEpipolarGradient(const CleanPair& p, double tol) {
 
 }  // namespace
 
-torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOptions& options) {
-  if (height <= 0 || width <= 0) {
-    throw std::invalid_argument("dispmvs geometry: PixelGrid needs a positive height and width");
+torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOptions& options,
+                        int64_t first_row) {
+  if (height <= 0 || width <= 0 || first_row < 0) {
+    throw std::invalid_argument(
+        "dispmvs geometry: PixelGrid needs a positive height and width and a first row >= 0");
   }
-  const torch::Tensor rows = torch::arange(height, options);
+  const torch::Tensor rows = torch::arange(first_row, first_row + height, options);
   const torch::Tensor cols = torch::arange(width, options);
   const auto yx = torch::meshgrid({rows, cols}, "ij");
   return torch::stack({yx[1], yx[0]}, 0).unsqueeze(0);  // (x, y) = (col, row)
@@ -171,7 +173,7 @@ torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOption
 
 EpipolarPair MakeEpipolarPair(const torch::Tensor& K_ref, const torch::Tensor& K_src,
                               const torch::Tensor& R, const torch::Tensor& T, int64_t height,
-                              int64_t width) {
+                              int64_t width, int64_t first_row) {
   const int64_t batch_sizes[] = {
       CheckBatchedMatrix(K_ref, 3, 3, "K_ref"), CheckBatchedMatrix(K_src, 3, 3, "K_src"),
       CheckBatchedMatrix(R, 3, 3, "R"), CheckBatchedMatrix(T, 3, 0, "T")};
@@ -199,7 +201,7 @@ EpipolarPair MakeEpipolarPair(const torch::Tensor& K_ref, const torch::Tensor& K
   const torch::Tensor info = info_cpu.to(K_ref.device());
   const torch::Tensor M = K_src.matmul(R).matmul(K_ref_inv).expand({batch, 3, 3});
 
-  const torch::Tensor grid = PixelGrid(height, width, K_ref.options()).reshape({2, -1});
+  const torch::Tensor grid = PixelGrid(height, width, K_ref.options(), first_row).reshape({2, -1});
   const torch::Tensor homogeneous = torch::cat({grid, torch::ones_like(grid.slice(0, 0, 1))}, 0);
   torch::Tensor a = M.matmul(homogeneous).reshape({batch, 3, height, width});
   torch::Tensor b = K_src.matmul(T.unsqueeze(-1)).expand({batch, 3, 1}).reshape({batch, 3, 1, 1});

@@ -39,17 +39,22 @@ struct EpipolarPair {
   torch::Tensor b;  // [B,3,1,1]  K_s T
 };
 
-// Pixel-centre grid [1,2,H,W] holding (x, y) = (col, row). Throws
-// std::invalid_argument unless height, width > 0.
-torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOptions& options);
+// Pixel-centre grid [1,2,H,W] holding (x, y) = (col, first_row + row): the
+// rows first_row.. of a larger image (a band of it) with first_row > 0.
+// Throws std::invalid_argument unless height, width > 0 and first_row >= 0.
+torch::Tensor PixelGrid(int64_t height, int64_t width, const torch::TensorOptions& options,
+                        int64_t first_row = 0);
 
 // Batch sizes may be B or 1 (broadcast). Throws std::invalid_argument on bad
 // shapes or mixed dtypes/devices. Cameras with non-finite entries or a
 // singular K_ref give a = 0 (and b = 0 where K_src or T is the culprit): every
 // function below reads that as degenerate.
+// The pair of the reference's rows first_row .. first_row + height - 1
+// (all of them with first_row = 0): a band of a larger image gets the same
+// coefficients, to the bit, as those rows of the whole image.
 EpipolarPair MakeEpipolarPair(const torch::Tensor& K_ref, const torch::Tensor& K_src,
                               const torch::Tensor& R, const torch::Tensor& T,
-                              int64_t height, int64_t width);
+                              int64_t height, int64_t width, int64_t first_row = 0);
 
 struct SourcePixels {
   torch::Tensor xy;     // [B,2,H,W]

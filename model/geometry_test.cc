@@ -1025,6 +1025,24 @@ TEST_P(GeometryPrecision, InverseDepthRange) {
                std::invalid_argument);
 }
 
+// A band of rows gets the coefficients of those rows of the whole image, to
+// the bit (the fine stage in bands relies on it), and PixelGrid's rows
+// start at first_row.
+TEST(GeometryShapes, ABandOfRowsHasTheWholeImagesCoefficients) {
+  const torch::Tensor K = torch::tensor({500.0f, 0.0f, 319.5f, 0.0f, 480.0f, 239.5f, 0.0f, 0.0f, 1.0f}).view({1, 3, 3});
+  const torch::Tensor R = torch::tensor({0.99f, 0.0f, 0.141f, 0.0f, 1.0f, 0.0f, -0.141f, 0.0f, 0.99f}).view({1, 3, 3});
+  const torch::Tensor T = torch::tensor({-0.3f, 0.02f, 0.05f}).view({1, 3});
+  const EpipolarPair whole = MakeEpipolarPair(K, K, R, T, 480, 640);
+  const EpipolarPair band = MakeEpipolarPair(K, K, R, T, 37, 640, 211);
+  EXPECT_TRUE(torch::equal(band.a, whole.a.narrow(2, 211, 37)));
+  EXPECT_TRUE(torch::equal(band.b, whole.b));
+  const torch::Tensor grid = PixelGrid(2, 3, torch::kFloat32, 5);
+  EXPECT_EQ(grid[0][1][0][2].item<float>(), 5.0f);  // y of row 0
+  EXPECT_EQ(grid[0][1][1][2].item<float>(), 6.0f);
+  EXPECT_EQ(grid[0][0][1][2].item<float>(), 2.0f);  // x unchanged
+  EXPECT_THROW(PixelGrid(2, 3, torch::kFloat32, -1), std::invalid_argument);
+}
+
 TEST(GeometryShapes, PixelGridAndInputValidation) {
   const torch::Tensor grid = PixelGrid(3, 4, torch::kFloat32);
   ASSERT_EQ(grid.sizes(), (std::vector<int64_t>{1, 2, 3, 4}));

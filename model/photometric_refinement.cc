@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "model/depth_sweep.h"
@@ -243,17 +244,15 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   const int64_t h = images.size(3), w = images.size(4);
   const int64_t r = options.window_radius;
 
-  // Grey values; the reference's window statistics once, then a copy per
-  // source for the per-hypothesis arithmetic ([B*N,1,H,W]).
+  // Grey values; the reference's window statistics once, shared by its
+  // sources ([B,1,H,W]: surface_ncc.h reads them per batch item, not a copy
+  // per source).
   const torch::Tensor images_float = images.to(opts);
   const torch::Tensor grey = images_float.mean(2);  // [B,V,H,W]
   const torch::Tensor reference = grey.narrow(1, 0, 1);  // [B,1,H,W]
   const torch::Tensor reference_mean = WindowMean(reference, r);
   const torch::Tensor reference_var =
       torch::clamp_min(WindowMean(reference * reference, r) - reference_mean * reference_mean, 0);
-  const torch::Tensor ref = reference.repeat_interleave(n, 0);
-  const torch::Tensor ref_mean = reference_mean.repeat_interleave(n, 0);
-  const torch::Tensor ref_var = reference_var.repeat_interleave(n, 0);
   const torch::Tensor src = grey.narrow(1, 1, n).reshape({b * n, 1, h, w});
 
   const torch::Tensor K = intrinsics.to(opts);
@@ -275,15 +274,21 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   // as they lie from the reference pixel).
   const double margin = static_cast<double>(r);
   // Every source's NCC at the network's depth, and whether it counts.
-  const SurfaceCorrelation at_network =
-      CorrelateAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, w_network, r, margin);
-  const torch::Tensor weights =
-      BetterHalfOfSources(at_network.ncc.view({b, n, h, w}), at_network.ok.view({b, n, h, w}));
+  // Per source, [B*N,1,H,W]: kept only for the choice and the network
+  // depth's score (at 24 megapixels and four sources each such map is 384 MB).
+  torch::Tensor weights, network_score;
+  {
+    const SurfaceCorrelation at_network =
+        CorrelateAlongSurface(src, reference, reference_mean, reference_var, pair.a, pair.b, w_network, r, margin);
+    weights = BetterHalfOfSources(at_network.ncc.view({b, n, h, w}), at_network.ok.view({b, n, h, w}));
+    network_score = CombineSources(at_network, weights);
+  }
   // A chosen source whose window leaves its image at some hypothesis scores
   // -1 there (the worst correlation): the search does not wander off the
   // sources it was judged on (CombineSources, ScoreAlongSurface).
   const auto centred_score = [&](const torch::Tensor& surface) {
-    return ScoreAlongSurface(src, ref, ref_mean, ref_var, pair.a, pair.b, surface, weights, r, margin);
+    return ScoreAlongSurface(src, reference, reference_mean, reference_var, pair.a, pair.b, surface, weights, r,
+                             margin);
   };
   // What every hypothesis and candidate is compared by: the best of the
   // windows shifted by window_shift that contain the pixel
@@ -313,7 +318,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   // Scored as every candidate is, so that none wins by the shifts alone
   // (the network's depth unshifted against shifted candidates gave realval's
   // MVS pairs the same within 2 %: 0.624 both).
-  torch::Tensor start_score = BestOfShiftedWindows(CombineSources(at_network, weights), options.window_shift);
+  torch::Tensor start_score = BestOfShiftedWindows(network_score, options.window_shift);
   // Where the start is no longer the network's depth (the sweep's or the
   // coarse propagation's surface took it): counts as refined.
   torch::Tensor start_replaced = torch::zeros_like(usable);
@@ -367,36 +372,44 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
   }
 
   // How far the match moves per unit of inverse depth, in every source.
-  const torch::Tensor rate = MatchShiftPerInverseDepth(pair, w0.repeat_interleave(n, 0));
-  const torch::Tensor max_rate = rate.view({b, n, h, w}).amax(1, /*keepdim=*/true);
+  const torch::Tensor max_rate =
+      MatchShiftPerInverseDepth(pair, w0.repeat_interleave(n, 0)).view({b, n, h, w}).amax(1, /*keepdim=*/true);
   const torch::Tensor searchable = usable & (max_rate > 0);
   const torch::Tensor dw = torch::where(searchable, options.step_pixels / max_rate,
                                         torch::zeros_like(max_rate));
 
-  std::vector<torch::Tensor> scores;
-  for (int64_t k = -options.steps; k <= options.steps; ++k) {
-    if (k == 0) {
-      scores.push_back(start_score);
-    } else {
-      scores.push_back(surface_score(torch::add(w0, dw, static_cast<double>(k))));
+  // The search: its score volume and parabola go at the end of the block,
+  // before propagation allocates its own maps.
+  torch::Tensor best, refined, w_out;
+  {
+    torch::Tensor volume;  // [B,2K+1,H,W]
+    {
+      std::vector<torch::Tensor> scores;
+      for (int64_t k = -options.steps; k <= options.steps; ++k) {
+        if (k == 0) {
+          scores.push_back(start_score);
+        } else {
+          scores.push_back(surface_score(torch::add(w0, dw, static_cast<double>(k))));
+        }
+      }
+      volume = torch::cat(scores, 1);
     }
+    torch::Tensor best_index;
+    std::tie(best, best_index) = volume.max(1, /*keepdim=*/true);
+    const int64_t last = 2 * options.steps;
+    const torch::Tensor before = volume.gather(1, torch::clamp_min(best_index - 1, 0));
+    const torch::Tensor after = volume.gather(1, torch::clamp_max(best_index + 1, last));
+    // Parabola through the best score and its neighbours: its vertex.
+    const torch::Tensor curvature = before - 2 * best + after;
+    const torch::Tensor offset =
+        torch::where(curvature < -1e-6, torch::clamp(0.5 * (before - after) / curvature, -0.5, 0.5),
+                     torch::zeros_like(curvature));
+    const torch::Tensor w_new =
+        w0 + (best_index.to(opts.dtype()) - static_cast<double>(options.steps) + offset) * dw;
+    refined = searchable & textured & (best_index > 0) & (best_index < last) & (best >= options.min_ncc) &
+              (before > -1) & (after > -1) & (w_new > 0);
+    w_out = torch::where(refined, w_new, w0);
   }
-  const torch::Tensor volume = torch::cat(scores, 1);  // [B,2K+1,H,W]
-  const auto [best, best_index] = volume.max(1, /*keepdim=*/true);
-  const int64_t last = 2 * options.steps;
-  const torch::Tensor before = volume.gather(1, torch::clamp_min(best_index - 1, 0));
-  const torch::Tensor after = volume.gather(1, torch::clamp_max(best_index + 1, last));
-  // Parabola through the best score and its neighbours: its vertex.
-  const torch::Tensor curvature = before - 2 * best + after;
-  const torch::Tensor offset =
-      torch::where(curvature < -1e-6, torch::clamp(0.5 * (before - after) / curvature, -0.5, 0.5),
-                   torch::zeros_like(curvature));
-  const torch::Tensor w_new =
-      w0 + (best_index.to(opts.dtype()) - static_cast<double>(options.steps) + offset) * dw;
-  const torch::Tensor refined = searchable & textured & (best_index > 0) & (best_index < last) &
-                                (best >= options.min_ncc) & (before > -1) & (after > -1) & (w_new > 0);
-
-  torch::Tensor w_out = torch::where(refined, w_new, w0);
   torch::Tensor changed = refined | start_replaced;  // updated in place by propagation
   torch::Tensor best_out = best;
   torch::Tensor output_score = torch::where(refined, best, start_score);

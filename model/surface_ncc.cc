@@ -27,8 +27,13 @@ void CheckShapes(const torch::Tensor& source, const torch::Tensor& reference,
   };
   if (!source.defined() || source.dim() != 4 || source.size(1) != 1) fail("source must be [B*N,1,H,W]");
   const auto planes = source.sizes();
+  const std::vector<int64_t> shared = {surface.defined() ? surface.size(0) : -1, 1, source.size(2),
+                                       source.size(3)};
   for (const torch::Tensor* t : {&reference, &reference_mean, &reference_var}) {
-    if (!t->defined() || t->sizes() != planes) fail("the reference tensors must be source's shape");
+    if (!t->defined() || (t->sizes() != planes && t->sizes() != torch::IntArrayRef(shared)) ||
+        t->sizes() != reference.sizes()) {
+      fail("the reference tensors must be [B,1,H,W] (surface's batch) or source's shape, all three alike");
+    }
   }
   const std::vector<int64_t> pair_shape = {source.size(0), 3, source.size(2), source.size(3)};
   const std::vector<int64_t> constant_shape = {source.size(0), 3, 1, 1};
@@ -73,6 +78,7 @@ struct CpuPlanes {
   torch::Tensor src, ref, mean, var, a, b, surface;
   int64_t planes, n, h, w;
   bool b_per_pixel;
+  bool ref_per_plane;  // the reference tensors [B*N,...], else one per batch item [B,...]
   float half_w, half_h;
   double margin;
 
@@ -92,6 +98,7 @@ struct CpuPlanes {
         w(source.size(3)),
         b_per_pixel(b_in.size(2) == source.size(2) && b_in.size(3) == source.size(3) &&
                     source.size(2) * source.size(3) > 1),
+        ref_per_plane(reference.size(0) == source.size(0)),
         half_w(0.5f * static_cast<float>(source.size(3) - 1)),
         half_h(0.5f * static_cast<float>(source.size(2) - 1)),
         margin(margin_in) {}
@@ -113,9 +120,9 @@ struct CpuPlanes {
 
   void Correlate(int64_t i, int64_t radius, int64_t row_begin, int64_t row_end, float* ncc, bool* ok,
                  const float* needed = nullptr) const {
-    const int64_t hw = h * w;
-    CorrelateRows(Sampler(i), ref.data_ptr<float>() + i * hw, mean.data_ptr<float>() + i * hw,
-                  var.data_ptr<float>() + i * hw, radius, row_begin, row_end, ncc, ok, needed);
+    const int64_t hw = h * w, offset = (ref_per_plane ? i : i / n) * hw;
+    CorrelateRows(Sampler(i), ref.data_ptr<float>() + offset, mean.data_ptr<float>() + offset,
+                  var.data_ptr<float>() + offset, radius, row_begin, row_end, ncc, ok, needed);
   }
 };
 
@@ -203,11 +210,16 @@ torch::Tensor ScoreAlongSurfaceCpu(const torch::Tensor& source, const torch::Ten
 }
 
 // CorrelateAlongSurfaceByOps on checked shapes.
-SurfaceCorrelation CorrelateByOps(const torch::Tensor& source, const torch::Tensor& reference,
-                                  const torch::Tensor& reference_mean, const torch::Tensor& reference_var,
+SurfaceCorrelation CorrelateByOps(const torch::Tensor& source, const torch::Tensor& reference_in,
+                                  const torch::Tensor& reference_mean_in, const torch::Tensor& reference_var_in,
                                   const torch::Tensor& a, const torch::Tensor& b, const torch::Tensor& surface,
                                   int64_t radius, double margin) {
   const int64_t n = source.size(0) / surface.size(0);
+  const auto per_plane = [&](const torch::Tensor& t) {
+    return t.size(0) == source.size(0) ? t : t.repeat_interleave(n, 0);
+  };
+  const torch::Tensor reference = per_plane(reference_in), reference_mean = per_plane(reference_mean_in),
+                      reference_var = per_plane(reference_var_in);
   const int64_t h = source.size(2), w = source.size(3);
   const torch::Tensor per_source = surface.repeat_interleave(n, 0);
   const torch::Tensor projected = a + per_source * b;

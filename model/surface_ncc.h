@@ -26,9 +26,10 @@ struct SurfaceCorrelation {
 };
 
 // source: [B*N,1,H,W] grey source images (N sources per batch item, batch
-// item-major); reference, reference_mean, reference_var: [B*N,1,H,W] the
-// reference's grey values and their window mean and variance, repeated per
-// source; a: [B*N,3,H,W] and b: [B*N,3,H,W] or [B*N,3,1,1], the epipolar
+// item-major); reference, reference_mean, reference_var: [B,1,H,W] the
+// reference's grey values and their window mean and variance, shared by the
+// batch item's N sources (or [B*N,1,H,W], repeated per source: the same
+// result, N times the memory); a: [B*N,3,H,W] and b: [B*N,3,H,W] or [B*N,3,1,1], the epipolar
 // pair of geometry.h (a reference pixel at inverse depth w projects to the
 // source's homogeneous a + w b); surface: [B,1,H,W] inverse depth per
 // reference pixel (<= 0: no surface). A source pixel counts (ok) where its

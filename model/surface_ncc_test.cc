@@ -253,11 +253,46 @@ TEST(SurfaceNccTest, ScoreEqualsTheCombinedCorrelations) {
                std::invalid_argument);
 }
 
+// The reference's tensors once per batch item ([B,1,H,W], read by every
+// source of the item) give exactly what copies per source give, on both
+// paths: the refinement passes them so, N times less memory.
+TEST(SurfaceNccTest, AReferenceSharedByItsSourcesEqualsOneCopyPerSource) {
+  const int64_t radius = 2, n = 3;
+  const Inputs in = MakeInputs(radius);
+  const auto shared = [&](const torch::Tensor& per_source) {
+    return per_source.view({2, n, 1, per_source.size(2), per_source.size(3)}).select(1, 0);
+  };
+  ASSERT_TRUE(torch::equal(shared(in.reference).repeat_interleave(n, 0), in.reference));
+  torch::manual_seed(9);
+  const torch::Tensor weights = (torch::rand({2, n, in.source.size(2), in.source.size(3)}) > 0.3).to(torch::kFloat32);
+  const auto correlate = [&](bool by_ops, const torch::Tensor& ref, const torch::Tensor& mean, const torch::Tensor& var) {
+    return by_ops ? CorrelateAlongSurfaceByOps(in.source, ref, mean, var, in.a, in.b, in.surface, radius, radius)
+                  : CorrelateAlongSurface(in.source, ref, mean, var, in.a, in.b, in.surface, radius, radius);
+  };
+  for (const bool by_ops : {false, true}) {
+    const SurfaceCorrelation copies = correlate(by_ops, in.reference, in.reference_mean, in.reference_var);
+    const SurfaceCorrelation once =
+        correlate(by_ops, shared(in.reference), shared(in.reference_mean), shared(in.reference_var));
+    EXPECT_TRUE(torch::equal(copies.ncc, once.ncc)) << "by ops " << by_ops;
+    EXPECT_TRUE(torch::equal(copies.ok, once.ok)) << "by ops " << by_ops;
+  }
+  const torch::Tensor score = ScoreAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a,
+                                                in.b, in.surface, weights, radius, radius);
+  const torch::Tensor score_once =
+      ScoreAlongSurface(in.source, shared(in.reference), shared(in.reference_mean), shared(in.reference_var), in.a,
+                        in.b, in.surface, weights, radius, radius);
+  EXPECT_TRUE(torch::equal(score, score_once));
+}
+
 TEST(SurfaceNccTest, RefusesMismatchedShapes) {
   const Inputs in = MakeInputs(2);
   EXPECT_THROW(CorrelateAlongSurface(in.source, in.reference, in.reference_mean, in.reference_var, in.a, in.b,
                                      in.surface.narrow(3, 0, 5), 2, 2),
                std::invalid_argument);
+  EXPECT_THROW(CorrelateAlongSurface(in.source, in.reference.narrow(0, 0, 4), in.reference_mean.narrow(0, 0, 4),
+                                     in.reference_var.narrow(0, 0, 4), in.a, in.b, in.surface, 2, 2),
+               std::invalid_argument);
+  // One per batch item, or one per source, but all three alike.
   EXPECT_THROW(CorrelateAlongSurface(in.source, in.reference.narrow(0, 0, 2), in.reference_mean, in.reference_var,
                                      in.a, in.b, in.surface, 2, 2),
                std::invalid_argument);

@@ -292,6 +292,12 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "On the CPU: MiB of freed network maps of 32 MiB and more kept for reuse (from "
        "about 2 megapixels the maps are that large); 0 = none kept, each mapped afresh by "
        "the C library, several times slower at 3 megapixels and more.")
+      ("band_megapixels", po::value<double>(&o.photometric.estimator.band_megapixels)
+           ->default_value(o.photometric.estimator.band_megapixels),
+       "The network's fine stage runs in bands of rows of about this many megapixels "
+       "(with 108 rows of overlap on either side), so its memory stops growing with the "
+       "image: less memory, a little more time; 0 = the whole image at once. The maps "
+       "agree with a whole-image pass to float rounding.")
       ("device", po::value<std::string>(&o.photometric.estimator.device)
            ->default_value(o.photometric.estimator.device),
        "cpu, cuda or cuda:<gpu index> (needs a CUDA build of LibTorch).")
