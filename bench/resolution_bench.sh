@@ -30,8 +30,9 @@
 #            [--program] [--memory] [--max_uncached_mp MP]
 #   BUILD  a build folder with bench/dispmvs_bench (and, for --program,
 #          src/dispmvs_colmap and bench/dispmvs_make_large_workspace)
-#   OUT    output folder: resolution_bench.md (the table), the logs, and
-#          resolution_bench.tsv (one line per size and budget, for plots)
+#   OUT    output folder: resolution_bench.md (the table), the logs,
+#          resolution_bench.tsv (one line per size and variant) and, where
+#          python3 is, resolution_bench.svg (bench/plot_resolution.py)
 #   --max_uncached_mp MP  sizes above MP megapixels run with the cache only
 #          (without it they take minutes a pass) (default 5)
 set -euo pipefail
@@ -195,7 +196,14 @@ main() {
     echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     printf '%s\n' "${rows[@]}"
   } >"$out/resolution_bench.md"
-  echo "wrote $out/resolution_bench.md and $tsv" >&2
+  # The plot (s/MP and peak memory against megapixels), standard-library
+  # Python only.
+  if command -v python3 >/dev/null; then
+    python3 "$(dirname "$0")/plot_resolution.py" "$tsv" "$out/resolution_bench.svg"
+    echo "wrote $out/resolution_bench.md, $out/resolution_bench.svg and $tsv" >&2
+  else
+    echo "wrote $out/resolution_bench.md and $tsv (no python3: no plot)" >&2
+  fi
 }
 
 main "$@"; exit $?  # one line: bash has read it whole before running main

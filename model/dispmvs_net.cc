@@ -613,7 +613,7 @@ int64_t FineBandHalo(int64_t iterations) { return 11 * iterations + 5; }
 // FineBandHalo() rows on either side (the reference's features, context and
 // start narrowed, its epipolar geometry computed for those rows) and keeping
 // its own rows. The stage's maps then never exist for the whole image: at
-// 24 megapixels and four sources they would be about 6 GB. Outputs as
+// 24 megapixels and four sources they would be about 8 GB. Outputs as
 // FullResolutionOutputs gives them in eval mode (cropped to height x width);
 // they agree with the whole-image pass to float rounding (the same
 // arithmetic on the same values; convolutions of maps of another height may

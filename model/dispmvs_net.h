@@ -141,11 +141,11 @@ class DispMvsNetImpl : public torch::nn::Module {
   // pixels with the rows its own ones depend on (FineBandHalo: 27 fine rows,
   // 108 pixels, on either side for 2 fine iterations), whenever the image
   // has more rows than one band. The fine stage's maps (hidden states,
-  // correlation, the GRU's, about 270 bytes per pixel with four sources) then
-  // never exist for the whole image; the cost is the halos' share of the
-  // fine stage's time. The outputs agree with a whole-image pass to float
-  // rounding. 0 (the default): the whole image at once. Throws
-  // std::invalid_argument if pixels < 0.
+  // correlation, the GRU's: 330 bytes per image pixel with four sources,
+  // measured at 4000x3000) then never exist for the whole image; the cost is
+  // the halos' share of the fine stage's time. The outputs agree with a
+  // whole-image pass to float rounding. 0 (the default): the whole image at
+  // once. Throws std::invalid_argument if pixels < 0.
   void set_fine_band_pixels(int64_t pixels);
   int64_t fine_band_pixels() const { return fine_band_pixels_; }
 
