@@ -24,14 +24,14 @@
 #      summary.md (the commands and numbers to paste into models/README.md).
 #      At most 8 files, each under 16 MiB, as the device tool brings back.
 #
-# On the device (10 minutes per command, 15 per session, start-up included):
+# On the device (10 minutes per command, 15 per loan, start-up included):
 #   call 1:  train/gpu_train.sh --build_only          (a few minutes)
 #   call 2:  train/gpu_train.sh --minutes 6           (probe + training; the
 #            selection and evaluation add about 2-3 minutes)
 # One call with a shorter --minutes also works: the build is skipped when done.
 # Here, on a CPU, the same script runs at a tiny size as the ctest
-# train_gpu_script_dry_run (train/CMakeLists.txt), so that a session with a
-# device spends its minutes training, not debugging.
+# train_gpu_script_dry_run (train/CMakeLists.txt), so that a device's lent
+# minutes go to training, not debugging.
 set -euo pipefail
 
 usage() {
