@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -225,6 +226,9 @@ struct StageInput {
   // The stage's maps are the rows first_row.. of the image's stage grid (a
   // band of the fine stage); 0: all of it.
   int64_t first_row = 0;
+  // The sources' correlation pyramid, made once for all bands of a stage
+  // (it depends on the sources alone); null: SetUpStage makes it.
+  std::shared_ptr<const EpipolarCorrelation> correlation;
 };
 
 struct StageResult {
@@ -249,7 +253,7 @@ struct StageSetup {
   torch::Tensor ref_features;  // [B*N,C,h,w]: the reference's, once per source
   // Either the segment volume (v2 coarse) or the 2-D sampler (paper, fine).
   std::optional<SegmentCorrelation> volume;
-  std::optional<EpipolarCorrelation> correlation;
+  std::shared_ptr<const EpipolarCorrelation> correlation;
 };
 
 // Features of all views [B*V,C,h,w] -> the reference's [B,C,h,w] and the
@@ -310,8 +314,10 @@ StageSetup SetUpStage(const StageInput& in, StageTimer* timer) {
     const StageTimer::Section correlation(timer, NetStage::kCorrelation);
     if (segment) {
       setup.volume.emplace(setup.ref_features, in.src_features, *segment, in.levels, in.samples);
+    } else if (in.correlation) {
+      setup.correlation = in.correlation;
     } else {
-      setup.correlation.emplace(in.src_features, in.levels, in.samples);
+      setup.correlation = std::make_shared<const EpipolarCorrelation>(in.src_features, in.levels, in.samples);
     }
   }
   return setup;
@@ -625,6 +631,13 @@ DispMvsOutput FineStageInBands(const StageInput& fine, UpdateBlock& block, int64
   const int64_t halo = FineBandHalo(fine.iterations);
   const torch::TensorOptions opts = fine.ref_features.options();
   const int64_t b = fine.batch;
+  // The sources' pyramid (on the CPU also a channels-last copy of every
+  // level, 1.4 GB at 24 megapixels) once, not once per band.
+  StageInput shared = fine;
+  {
+    const StageTimer::Section correlation(timer, NetStage::kCorrelation);
+    shared.correlation = std::make_shared<const EpipolarCorrelation>(fine.src_features, fine.levels, fine.samples);
+  }
   DispMvsOutput out;
   torch::Tensor inv_depth = torch::zeros({b, 1, height, width}, opts);
   out.valid = torch::zeros({b, 1, height, width}, opts.dtype(torch::kBool));
@@ -633,7 +646,7 @@ DispMvsOutput FineStageInBands(const StageInput& fine, UpdateBlock& block, int64
   for (int64_t r0 = 0; r0 < h; r0 += band_rows) {
     const int64_t r1 = std::min(h, r0 + band_rows);
     const int64_t lo = std::max<int64_t>(0, r0 - halo), hi = std::min(h, r1 + halo);
-    StageInput band = fine;
+    StageInput band = shared;
     band.ref_features = fine.ref_features.narrow(2, lo, hi - lo);
     band.context = fine.context.narrow(2, lo, hi - lo);
     band.init_inv_depth = fine.init_inv_depth.narrow(2, lo, hi - lo);
