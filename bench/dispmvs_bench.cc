@@ -200,20 +200,24 @@ std::vector<std::string> SplitComma(const std::string& s) {
   return out;
 }
 
-// A number in [0, 1].
-double ParseFraction(const std::string& flag, const std::string& value) {
+// A number in [low, high].
+double ParseNumber(const std::string& flag, const std::string& value, double low, double high) {
   size_t used = 0;
-  double v = -1;
+  double v = low - 1;
   try {
     v = std::stod(value, &used);
   } catch (const std::exception&) {
     used = 0;
   }
-  if (value.empty() || used != value.size() || !(v >= 0 && v <= 1)) {
-    throw std::invalid_argument(flag + " must be a number in [0, 1], got '" + value + "'");
+  if (value.empty() || used != value.size() || !(v >= low && v <= high)) {
+    std::ostringstream range;
+    range << "[" << low << ", " << high << "]";
+    throw std::invalid_argument(flag + " must be a number in " + range.str() + ", got '" + value + "'");
   }
   return v;
 }
+
+double ParseFraction(const std::string& flag, const std::string& value) { return ParseNumber(flag, value, 0, 1); }
 
 int64_t ParseInteger(const std::string& flag, const std::string& value, int64_t min, int64_t max) {
   size_t used = 0;
@@ -286,15 +290,7 @@ Options ParseArgs(int argc, char** argv) {
     } else if (flag == "--memory") {
       o.memory = ParseInteger(flag, value, 0, 1) == 1;
     } else if (flag == "--band_megapixels") {
-      size_t used = 0;
-      try {
-        o.band_megapixels = std::stod(value, &used);
-      } catch (const std::exception&) {
-        used = 0;
-      }
-      if (value.empty() || used != value.size() || !(o.band_megapixels >= 0 && o.band_megapixels <= 1e4)) {
-        throw std::invalid_argument("--band_megapixels must be a number in [0, 10000], got '" + value + "'");
-      }
+      o.band_megapixels = ParseNumber(flag, value, 0, 1e4);
     } else if (flag == "--block_cache_mb") {
       o.block_cache_mb = ParseInteger(flag, value, 0, int64_t{1} << 20);
     } else if (flag == "--refine_steps") {
