@@ -16,7 +16,12 @@
 #                 the network's
 #     SETTING     "REPROJ DEPTH CONSISTENT CONFIDENCE", the values of
 #                 --max_reproj_error --max_depth_error --min_num_consistent
-#                 --min_confidence, e.g. "1 0.01 2 0" (the defaults)
+#                 --min_confidence, e.g. "1 0.01 2 0.1" (fusion's defaults);
+#                 the geometric filter gets the same thresholds without its
+#                 support rule (--filter_max_reproj_error REPROJ
+#                 --filter_max_depth_error DEPTH --filter_min_support 0), the
+#                 one rule for both that this sweep was made for
+#                 (bench/filter_curve.sh sweeps the filter's own)
 #
 # Each setting leaves its logs and scores in each scene as fuse_<K>.log and
 # eval_<K>.{tsv,json} (K = the setting's position, from 1), and the geometric
@@ -57,6 +62,7 @@ for setting in "$@"; do
   for ws in "${workspaces[@]}"; do
     "$build/src/dispmvs_colmap" --workspace_path "$ws" --mode fuse --max_num_src_images "$sources" \
       --max_reproj_error "$reproj" --max_depth_error "$depth" --min_num_consistent "$consistent" \
+      --filter_max_reproj_error "$reproj" --filter_max_depth_error "$depth" --filter_min_support 0 \
       --min_confidence "$confidence" > "$ws/fuse_$k.log" 2>&1 ||
       die "dispmvs_colmap failed on $ws (see $ws/fuse_$k.log)"
     "$build/src/dispmvs_eval" --workspace_path "$ws" --types dispmvs.geometric \

@@ -7,21 +7,13 @@ library only, so it runs wherever the benchmark does).
 Usage: bench/plot_resolution.py resolution_bench.tsv out.svg
 """
 import csv
-import math
 import sys
+
+from plot_common import COLOURS, number
 
 WIDTH, HEIGHT = 900, 380
 PANEL_W, PANEL_H = 360, 260
 MARGIN_X, MARGIN_Y = 70, 50
-COLOURS = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b"]
-
-
-def number(text):
-    try:
-        value = float(text)
-    except ValueError:
-        return None
-    return value if math.isfinite(value) else None
 
 
 def read_series(path):

@@ -1,6 +1,7 @@
 #include "fusion/geometric_filter.h"
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -25,6 +26,38 @@ void RelativePose(const DepthView& from, const DepthView& to, Eigen::Matrix3d* r
   *offset = to.t - *rotation * from.t;
 }
 
+// Per pixel, whether at least `min_support` of the pixels of the
+// (2 radius + 1)^2 window around it that lie inside the image pass: window
+// sums of `pass` from its summed-area table.
+std::vector<uint8_t> SupportedPixels(const std::vector<uint8_t>& pass, int width, int height,
+                                     int radius, double min_support) {
+  const std::size_t stride = static_cast<std::size_t>(width) + 1;
+  // table[(r + 1) * stride + (c + 1)]: passing pixels in rows <= r, cols <= c.
+  std::vector<uint32_t> table(stride * (static_cast<std::size_t>(height) + 1), 0u);
+  for (int row = 0; row < height; ++row) {
+    uint32_t row_sum = 0;
+    for (int col = 0; col < width; ++col) {
+      row_sum += pass[static_cast<std::size_t>(row) * width + col];
+      table[(row + 1) * stride + col + 1] = table[row * stride + col + 1] + row_sum;
+    }
+  }
+  std::vector<uint8_t> supported(pass.size(), 0u);
+  for (int row = 0; row < height; ++row) {
+    const int top = std::max(row - radius, 0), bottom = std::min(row + radius, height - 1);
+    for (int col = 0; col < width; ++col) {
+      const std::size_t index = static_cast<std::size_t>(row) * width + col;
+      if (!pass[index]) continue;
+      const int left = std::max(col - radius, 0), right = std::min(col + radius, width - 1);
+      const uint32_t passing = table[(bottom + 1) * stride + right + 1] -
+                               table[top * stride + right + 1] -
+                               table[(bottom + 1) * stride + left] + table[top * stride + left];
+      const double inside = static_cast<double>(bottom - top + 1) * (right - left + 1);
+      supported[index] = passing >= min_support * inside;
+    }
+  }
+  return supported;
+}
+
 }  // namespace
 
 void GeometricFilterOptions::Check() const {
@@ -38,6 +71,24 @@ void GeometricFilterOptions::Check() const {
   if (!std::isfinite(min_confidence)) {
     throw std::invalid_argument("GeometricFilterOptions.min_confidence must be finite");
   }
+  if (!(min_support >= 0.0 && min_support <= 1.0)) {
+    throw std::invalid_argument("GeometricFilterOptions.min_support must be in [0, 1], got " +
+                                std::to_string(min_support));
+  }
+  if (support_radius < 1 || support_radius > kMaxSupportRadius) {
+    throw std::invalid_argument("GeometricFilterOptions.support_radius must be in [1, " +
+                                std::to_string(kMaxSupportRadius) + "], got " +
+                                std::to_string(support_radius));
+  }
+}
+
+GeometricFilterOptions SupportFilterDefaults() {
+  GeometricFilterOptions options;
+  options.max_reprojection_error = 2.0;
+  options.max_relative_depth_error = 0.02;
+  options.min_support = 0.6;
+  options.support_radius = 2;
+  return options;
 }
 
 void ValidateDepthView(const DepthView& view, const std::string& what) {
@@ -145,6 +196,7 @@ GeometricFilterResult FilterDepthMap(const DepthView& reference,
   const float* reference_depth = reference.depth.data();
   float* kept_depth = result.depth.data();
   PairConsistency::Match match;
+  std::vector<uint8_t> pass(num_pixels, 0u);
   for (int row = 0; row < height; ++row) {
     for (int col = 0; col < width; ++col) {
       if (!HasUsableDepth(reference, row, col, options.min_confidence)) continue;
@@ -160,11 +212,16 @@ GeometricFilterResult FilterDepthMap(const DepthView& reference,
       }
       result.consistent_mask[index] = mask;
       result.num_consistent[index] = static_cast<uint8_t>(count);
-      if (count >= options.min_consistent_views) {
-        kept_depth[index] = depth;
-        ++result.num_kept;
-      }
+      pass[index] = count >= options.min_consistent_views;
     }
+  }
+  if (options.min_support > 0) {
+    pass = SupportedPixels(pass, width, height, options.support_radius, options.min_support);
+  }
+  for (std::size_t index = 0; index < num_pixels; ++index) {
+    if (!pass[index]) continue;
+    kept_depth[index] = reference_depth[index];
+    ++result.num_kept;
   }
   return result;
 }

@@ -194,6 +194,73 @@ TEST(GeometricFilterTest, MinConsistentViewsCountsAgreeingSources) {
   EXPECT_EQ(FilterDepthMap(s.views[0], s.Sources(), options).num_kept, 0u);
 }
 
+// The support rule against a direct count of each window: with the source
+// at the reference's pose every pixel maps onto itself, so a pixel passes
+// exactly where the source holds the reference's depth.
+TEST(GeometricFilterTest, SupportKeepsPassingPixelsWhoseWindowPassesToo) {
+  StereoPair pair(10.0f);
+  pair.source.t.setZero();
+  const int width = StereoPair::kWidth, height = StereoPair::kHeight;
+  std::vector<bool> agrees(static_cast<std::size_t>(width) * height);
+  uint32_t state = 12345u;  // a fixed pattern, about 70 % agreeing
+  for (int row = 0; row < height; ++row) {
+    for (int col = 0; col < width; ++col) {
+      state = state * 1664525u + 1013904223u;
+      const bool agree = (state >> 8) % 10 < 7;
+      agrees[row * width + col] = agree;
+      if (!agree) pair.source.depth.at(row, col) = 10.5f;  // 5 %: fails
+    }
+  }
+  GeometricFilterOptions options;
+  options.min_consistent_views = 1;
+  const GeometricFilterResult plain = FilterDepthMap(pair.reference, {&pair.source}, options);
+  for (int i = 0; i < width * height; ++i) ASSERT_EQ(plain.depth.data()[i] > 0.0f, agrees[i]) << i;
+
+  for (const auto& [radius, support] :
+       std::vector<std::pair<int, double>>{{1, 0.6}, {2, 0.6}, {2, 0.75}, {3, 1.0}, {2, 0.0}}) {
+    options.support_radius = radius;
+    options.min_support = support;
+    const GeometricFilterResult result = FilterDepthMap(pair.reference, {&pair.source}, options);
+    std::size_t expected_kept = 0;
+    for (int row = 0; row < height; ++row) {
+      for (int col = 0; col < width; ++col) {
+        int inside = 0, passing = 0;
+        for (int r = row - radius; r <= row + radius; ++r) {
+          for (int c = col - radius; c <= col + radius; ++c) {
+            if (r < 0 || r >= height || c < 0 || c >= width) continue;
+            ++inside;
+            passing += agrees[r * width + c] ? 1 : 0;
+          }
+        }
+        const bool keep = agrees[row * width + col] && passing >= support * inside;
+        expected_kept += keep ? 1 : 0;
+        EXPECT_EQ(result.depth.at(row, col), keep ? 10.0f : 0.0f)
+            << "radius " << radius << " support " << support << " at " << row << "," << col;
+        // Agreement itself is reported as without the support rule.
+        EXPECT_EQ(result.consistent_mask[row * width + col], plain.consistent_mask[row * width + col]);
+      }
+    }
+    EXPECT_EQ(result.num_kept, expected_kept) << "radius " << radius << " support " << support;
+    if (support > 0.0) {
+      EXPECT_LT(result.num_kept, plain.num_kept);
+    }
+  }
+}
+
+TEST(GeometricFilterTest, SupportDropsAnAgreementNoNeighbourShares) {
+  StereoPair pair(10.5f);  // every pixel fails ...
+  pair.source.t.setZero();
+  pair.source.depth.at(9, 14) = 10.0f;  // ... but one
+  pair.source.depth.at(9, 15) = 10.0f;  // and its neighbour
+  GeometricFilterOptions options;
+  options.min_consistent_views = 1;
+  EXPECT_EQ(FilterDepthMap(pair.reference, {&pair.source}, options).num_kept, 2u);
+  options.min_support = 2.0 / 25.0;  // two of a 5x5 window: both stay
+  EXPECT_EQ(FilterDepthMap(pair.reference, {&pair.source}, options).num_kept, 2u);
+  options.min_support = 3.0 / 25.0;
+  EXPECT_EQ(FilterDepthMap(pair.reference, {&pair.source}, options).num_kept, 0u);
+}
+
 TEST(GeometricFilterTest, NonFiniteAndNonPositiveDepthsAreNoDepth) {
   StereoPair pair(10.0f);
   pair.source.t.setZero();
@@ -272,6 +339,16 @@ TEST(GeometricFilterTest, OptionsCheckNamesTheField) {
   o = {};
   o.min_confidence = std::numeric_limits<double>::quiet_NaN();
   expect_field(o, "min_confidence");
+  for (double support : {-0.1, 1.1, std::numeric_limits<double>::quiet_NaN()}) {
+    o = {};
+    o.min_support = support;
+    expect_field(o, "min_support");
+  }
+  for (int radius : {0, kMaxSupportRadius + 1}) {
+    o = {};
+    o.support_radius = radius;
+    expect_field(o, "support_radius");
+  }
 }
 
 TEST(GeometricFilterTest, RejectsBadInputs) {

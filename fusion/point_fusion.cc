@@ -170,6 +170,23 @@ struct Accumulator {
   }
 };
 
+// Per pixel of `reference`, whether the geometric filter with `rule` keeps
+// it against `sources` (FilterDepthMap), needing `min_consistent` of them.
+std::vector<uint8_t> SupportedReferencePixels(
+    const FusionView& reference,
+    const std::vector<std::pair<int, std::shared_ptr<const FusionView>>>& sources,
+    const GeometricFilterOptions& rule, int min_consistent) {
+  std::vector<const DepthView*> geometries;
+  geometries.reserve(sources.size());
+  for (const auto& source : sources) geometries.push_back(&source.second->geometry);
+  GeometricFilterOptions reference_rule = rule;
+  reference_rule.min_consistent_views = min_consistent;
+  const GeometricFilterResult kept = FilterDepthMap(reference.geometry, geometries, reference_rule);
+  std::vector<uint8_t> supported(kept.depth.size());
+  for (std::size_t i = 0; i < supported.size(); ++i) supported[i] = kept.depth.data()[i] > 0.0f;
+  return supported;
+}
+
 }  // namespace
 
 std::vector<FusedPoint> FusePoints(const std::vector<FusionView>& views,
@@ -287,10 +304,18 @@ void FusePoints(int num_views, FusionViewCache* cache, const FusionOptions& opti
     const int width = reference.geometry.depth.width();
     const int height = reference.geometry.depth.height();
     const float* depth = reference.geometry.depth.data();
+    // With the support rule, a point starts only at a pixel the geometric
+    // filter keeps, so that the cloud and the geometric maps give the same
+    // verdict (the filter sees neither the box nor the pixels already
+    // consumed).
+    const std::vector<uint8_t> supported =
+        rule.min_support > 0 ? SupportedReferencePixels(reference, sources, rule, min_consistent)
+                             : std::vector<uint8_t>();
     for (int row = 0; row < height; ++row) {
       for (int col = 0; col < width; ++col) {
         const std::size_t index = static_cast<std::size_t>(row) * width + col;
         if (!HasUsableDepth(reference.geometry, row, col, rule.min_confidence)) continue;
+        if (!supported.empty() && !supported[index]) continue;
         if (consumed[v][index]) {
           if (stats != nullptr) ++stats->consumed_pixels_per_view[v];
           continue;

@@ -93,7 +93,9 @@ struct FusionStats {
 // reference pixel with a usable depth (geometric_filter.h) that no earlier
 // reference consumed, and that at least min_consistent_views of its source
 // views agree with (the view's own if set, else the options'; the test of
-// FilterDepthMap), becomes one point:
+// FilterDepthMap), and, with the rule's min_support > 0, that FilterDepthMap
+// keeps against the view's sources (dispmvs_colmap leaves it 0 in fusion),
+// becomes one point:
 //   xyz        mean of the reference point and the agreeing source points,
 //              each source point being the source's own depth at the rounded
 //              projection, back-projected;

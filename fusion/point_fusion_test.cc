@@ -49,6 +49,14 @@ struct SceneViews {
   }
 };
 
+// Multiplies every `col_step`-th pixel of every `row_step`-th row of a
+// one-channel map by `factor`.
+void DenseArrayFloatScale(colmap_io::DenseArray* map, int row_step, int col_step, float factor) {
+  for (int row = 0; row < map->height(); row += row_step) {
+    for (int col = 0; col < map->width(); col += col_step) map->at(row, col) *= factor;
+  }
+}
+
 // The plane a point lies on, by distance relative to its distance from the
 // first camera; -1 if none is within `tolerance`.
 int PlaneOf(const Scene& scene, const Eigen::Vector3d& x, double tolerance) {
@@ -278,6 +286,30 @@ TEST(PointFusionTest, PerViewMinimumOverridesTheOptions) {
   views[1].min_consistent_views = -1;
   EXPECT_EQ(FusePoints(views, keep_all, &stats).size(), num_pixels);
   EXPECT_EQ(stats.points_per_view, (std::vector<std::size_t>{0, num_pixels}));
+}
+
+// With the support rule a point starts only where the geometric filter keeps
+// the pixel: the first reference (nothing consumed yet) gives exactly the
+// filter's kept pixels, with and without the rule, and the rule drops the
+// scattered pixels that agree by accident.
+TEST(PointFusionTest, SupportRuleStartsPointsWhereTheFilterKeeps) {
+  SceneViews s;
+  // Every third pixel of every fifth row of view 0 off by 5 %: they agree
+  // with no source, and a 5x5 window holding two of them lacks 95 % support.
+  DenseArrayFloatScale(&s.views[0].geometry.depth, 5, 3, 1.05f);
+  GeometricFilterOptions rule;
+  rule.min_consistent_views = 1;
+  for (double support : {0.0, 0.95}) {
+    rule.min_support = support;
+    FusionStats stats;
+    FusePoints(s.views, rule, &stats);
+    const GeometricFilterResult kept = s.Filter(0, rule);
+    EXPECT_EQ(stats.points_per_view[0], kept.num_kept) << "support " << support;
+  }
+  GeometricFilterOptions without = rule, with = rule;
+  without.min_support = 0.0;
+  with.min_support = 0.95;
+  EXPECT_LT(s.Filter(0, with).num_kept + 1000, s.Filter(0, without).num_kept);
 }
 
 TEST(PointFusionTest, RejectsBadViews) {

@@ -125,7 +125,12 @@ struct Options {
   std::string mode = "full";
   dense::PlanOptions plan;
   dense::PhotometricOptions photometric;
+  // The consistency rule of fusion (COLMAP's StereoFusion thresholds), whose
+  // sources and confidence (--min_num_consistent, --min_confidence) the
+  // geometric pass shares.
   fusion::GeometricFilterOptions filter;
+  // The geometric pass's own thresholds and support rule (--filter_*).
+  fusion::GeometricFilterOptions geometric = fusion::SupportFilterDefaults();
   // COLMAP's StereoFusion options beyond the consistency rule (the rule is
   // `filter`, copied in by FusionOptions()).
   fusion::FusionOptions fusion;
@@ -144,6 +149,16 @@ struct Options {
   std::string command_line;  // shown in the report
 
   void Check() const;
+  // What the geometric pass is asked: `geometric`'s thresholds and support
+  // with `filter`'s sources and confidence.
+  fusion::GeometricFilterOptions GeometricRule() const {
+    fusion::GeometricFilterOptions rule = filter;
+    rule.max_reprojection_error = geometric.max_reprojection_error;
+    rule.max_relative_depth_error = geometric.max_relative_depth_error;
+    rule.min_support = geometric.min_support;
+    rule.support_radius = geometric.support_radius;
+    return rule;
+  }
   // What fusion is asked: `fusion` with the consistency rule `filter`.
   fusion::FusionOptions FusionRequest() const {
     fusion::FusionOptions request = fusion;
@@ -186,7 +201,21 @@ void Options::Check() const {
   if (!(filter.min_confidence >= 0 && filter.min_confidence <= 1)) {
     throw std::invalid_argument("--min_confidence must be in [0, 1]");
   }
+  if (!(geometric.max_reprojection_error > 0) || !std::isfinite(geometric.max_reprojection_error)) {
+    throw std::invalid_argument("--filter_max_reproj_error must be a positive number of pixels");
+  }
+  if (!(geometric.max_relative_depth_error > 0) || !std::isfinite(geometric.max_relative_depth_error)) {
+    throw std::invalid_argument("--filter_max_depth_error must be a positive fraction");
+  }
+  if (!(geometric.min_support >= 0 && geometric.min_support <= 1)) {
+    throw std::invalid_argument("--filter_min_support must be in [0, 1]");
+  }
+  if (geometric.support_radius < 1 || geometric.support_radius > fusion::kMaxSupportRadius) {
+    throw std::invalid_argument("--filter_support_radius must be in [1, " +
+                                std::to_string(fusion::kMaxSupportRadius) + "]");
+  }
   filter.Check();
+  GeometricRule().Check();
   if (!(fusion.max_normal_error >= 0 && fusion.max_normal_error <= 180)) {
     throw std::invalid_argument("--max_normal_error must be in [0, 180] degrees");
   }
@@ -469,11 +498,23 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("overwrite", po::bool_switch(&o.photometric.overwrite),
        "Recompute photometric maps that already exist.")
       ("max_reproj_error", po::value<double>(&o.filter.max_reprojection_error)
-           ->default_value(o.filter.max_reprojection_error, "1"),
-       "Geometric filter and fusion: largest forward-backward reprojection error, pixels.")
+           ->default_value(o.filter.max_reprojection_error,
+                          FormatDefault(o.filter.max_reprojection_error)),
+       "Fusion: largest forward-backward reprojection error, pixels, of a source pixel fused "
+       "with a reference pixel.")
       ("max_depth_error", po::value<double>(&o.filter.max_relative_depth_error)
-           ->default_value(o.filter.max_relative_depth_error, "0.01"),
-       "Largest relative depth difference between a pixel and its reprojection.")
+           ->default_value(o.filter.max_relative_depth_error,
+                          FormatDefault(o.filter.max_relative_depth_error)),
+       "Fusion: largest relative depth difference between a pixel and its reprojection.")
+      ("filter_max_reproj_error", po::value<double>(&o.geometric.max_reprojection_error)
+           ->default_value(o.geometric.max_reprojection_error,
+                          FormatDefault(o.geometric.max_reprojection_error)),
+       "Geometric filter: largest forward-backward reprojection error, pixels (looser than "
+       "fusion's: the support rule below keeps its precision).")
+      ("filter_max_depth_error", po::value<double>(&o.geometric.max_relative_depth_error)
+           ->default_value(o.geometric.max_relative_depth_error,
+                          FormatDefault(o.geometric.max_relative_depth_error)),
+       "Geometric filter: largest relative depth difference.")
       ("min_num_consistent", po::value<int>(&o.filter.min_consistent_views)
            ->default_value(o.filter.min_consistent_views),
        "Source views that must agree for a pixel to be kept (geometric filter and fusion). "
@@ -486,6 +527,16 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
        "depth is within 2 %, and 0 where no image signal lies within 32 pixels: 0.1 drops what the "
        "images give no evidence for (all-black or all-white views fuse nothing) and little "
        "else. 0 keeps every pixel, as before.")
+      ("filter_min_support", po::value<double>(&o.geometric.min_support)
+           ->default_value(o.geometric.min_support, FormatDefault(o.geometric.min_support)),
+       "Geometric filter: a pixel whose sources agree is kept only where at least this share "
+       "of the pixels of the window around it (--filter_support_radius) agree too: a wrong "
+       "depth agrees with a source by accident at scattered pixels, a right one over patches "
+       "of a surface. 0 = off, COLMAP's rule (the filter before: --filter_min_support 0 "
+       "--filter_max_reproj_error 1 --filter_max_depth_error 0.01).")
+      ("filter_support_radius", po::value<int>(&o.geometric.support_radius)
+           ->default_value(o.geometric.support_radius),
+       "Geometric filter: the support window is (2 r + 1) x (2 r + 1) pixels.")
       ("mask_path", po::value<std::string>(&o.mask_path),
        "Folder of masks, COLMAP's: MASK/NAME.png for image NAME (or MASK/NAME when NAME ends "
        "in .png), resampled to the maps' size; black pixels (red channel 0) are ignored by the "
@@ -547,6 +598,8 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
       ("PatchMatchStereo.depth_max", po::value<double>(), "= --depth_max")
       ("PatchMatchStereo.min_triangulation_angle", po::value<double>(), "= --min_triangulation_angle")
       ("PatchMatchStereo.filter_min_num_consistent", po::value<int>(), "= --min_num_consistent")
+      ("PatchMatchStereo.filter_geom_consistency_max_cost", po::value<double>(),
+       "= --filter_max_reproj_error")
       ("workspace_format", po::value<std::string>(), "COLMAP only (PMVS workspaces are not read)");
   // clang-format on
   description.add(colmap_spellings);
@@ -575,6 +628,9 @@ std::optional<Options> ParseCommandLine(int argc, char** argv) {
                      &o.plan.min_triangulation_angle);
   TakeColmapSpelling(values, "min_num_consistent", "PatchMatchStereo.filter_min_num_consistent",
                      &o.filter.min_consistent_views);
+  TakeColmapSpelling(values, "filter_max_reproj_error",
+                     "PatchMatchStereo.filter_geom_consistency_max_cost",
+                     &o.geometric.max_reprojection_error);
   if (values.count("StereoFusion.max_image_size") && values.count("PatchMatchStereo.max_image_size") &&
       values["StereoFusion.max_image_size"].as<int>() != values["PatchMatchStereo.max_image_size"].as<int>()) {
     throw std::invalid_argument(
@@ -768,7 +824,7 @@ int Run(const Options& options) {
   }
   if (fusion_claim) {
     summaries.emplace_back("geometric",
-                           dense::RunGeometricPass(workspace, plan, options.filter, std::cout, masks));
+                           dense::RunGeometricPass(workspace, plan, options.GeometricRule(), std::cout, masks));
     fusion_summary = dense::RunFusion(workspace, plan, options.FusionRequest(), ply, std::cout,
                                       static_cast<std::size_t>(options.fusion_cache_mb) << 20, masks);
   }
