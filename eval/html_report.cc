@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <optional>
 #include <sstream>
+#include <string>
+#include <utility>
 #include <stdexcept>
 #include <vector>
 
@@ -178,6 +180,24 @@ std::optional<DepthRange> RobustRange(const DenseArray& depth) {
   return range;
 }
 
+// The first of `images` whose camera is a pinhole one (after
+// image_undistorter, all are), with its name; nullopt when none is.
+std::optional<std::pair<std::string, CloudCamera>> FirstPinholeCamera(
+    const colmap_io::SparseModel& model, const std::vector<const colmap_io::Image*>& images) {
+  for (const colmap_io::Image* image : images) {
+    const colmap_io::Camera& camera = model.cameras.at(image->camera_id);
+    if (!camera.IsPinhole()) continue;
+    CloudCamera view;
+    view.K = camera.CalibrationMatrix();
+    view.R = image->RotationMatrix();
+    view.t = image->tvec;
+    view.width = static_cast<int>(camera.width);
+    view.height = static_cast<int>(camera.height);
+    return std::make_pair(image->name, view);
+  }
+  return std::nullopt;
+}
+
 void WriteStyle(std::ostringstream& html) {
   html << "<style>body{font-family:sans-serif;background:#fafafa;color:#222;margin:1em}"
           "table{border-collapse:collapse}td,th{border:1px solid #ccc;padding:4px;"
@@ -220,7 +240,9 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
   if (fs::is_regular_file(ply)) {
     const std::vector<colmap_io::PlyPoint> points = colmap_io::ReadPlyPoints(ply);
     html << "<p><code>" << Escape(ply.string()) << "</code>: " << points.size()
-         << " points. Orthographic views along the cloud's principal axes:</p>\n<table><tr>";
+         << " points. Orthographic views along the principal axes of its dense part (far "
+            "points, such as sky or stray matches, left out of the frame), and the view from "
+            "the first image's camera:</p>\n<table><tr>";
     const char* titles[] = {"top (thinnest axis)", "front", "side"};
     const std::vector<cv::Mat> views = RenderCloudViews(points, options.cloud_view_size);
     for (int v = 0; v < 3; ++v) {
@@ -229,6 +251,12 @@ HtmlReportSummary WriteHtmlReport(const fs::path& workspace_path, const fs::path
       html << "</td>";
     }
     html << "</tr></table>\n";
+    if (const auto first = FirstPinholeCamera(model, images)) {
+      const std::string title = "from the camera of " + first->first;
+      html << "<p>" << Escape(title) << "</p>\n";
+      page.Image(RenderCloudFromCamera(points, first->second, 2 * options.cloud_view_size),
+                 2 * options.cloud_view_size, title);
+    }
   } else {
     html << "<p>No fused cloud at <code>" << Escape(ply.string()) << "</code>.</p>\n";
   }

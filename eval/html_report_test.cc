@@ -186,9 +186,11 @@ TEST_F(HtmlReportTest, PatchMatchMapsAndTheCloudWhenPresent) {
   const fs::path html_path = dir_.path() / "report.html";
   const HtmlReportSummary summary = WriteHtmlReport(root_, html_path, options);
   const std::string html = ::dispmvs::testing::ReadFileBytes(html_path);
-  // Cloud views; per view with maps (view_06 has none left): image, bar,
-  // depth, confidence; PatchMatch's map of view_03.
-  EXPECT_EQ(summary.embedded_images, 3 + 6 * 4 + 1);
+  // Cloud views (three along its axes, one from the first image's camera);
+  // per view with maps (view_06 has none left): image, bar, depth,
+  // confidence; PatchMatch's map of view_03.
+  EXPECT_EQ(summary.embedded_images, 4 + 6 * 4 + 1);
+  EXPECT_NE(html.find("from the camera of view_00.png"), std::string::npos);
   EXPECT_NE(html.find("1 registered image(s) without any depth map are not listed"),
             std::string::npos);
   EXPECT_EQ(html.find("view_06.png"), std::string::npos);
@@ -196,8 +198,10 @@ TEST_F(HtmlReportTest, PatchMatchMapsAndTheCloudWhenPresent) {
   EXPECT_NE(html.find("320x240, 50.0%"), std::string::npos);
   EXPECT_NE(html.find("500 points"), std::string::npos);
   const std::vector<cv::Size> pictures = Pictures(html);
-  ASSERT_GE(pictures.size(), 3u);
+  ASSERT_GE(pictures.size(), 4u);
   for (int v = 0; v < 3; ++v) EXPECT_EQ(pictures[static_cast<std::size_t>(v)], cv::Size(200, 200));
+  // Twice as wide, with the 320x240 camera's aspect ratio.
+  EXPECT_EQ(pictures[3], cv::Size(400, 300));
 }
 
 }  // namespace
