@@ -12,7 +12,7 @@
 // continues from confident pixels nearby in photographs of buildings and
 // rooms; the nearest confident pixel's plane is exact over a planar
 // continuation. Not where surfaces are small and separate: off by default
-// (ConfidentPlaneFillOptions; docs/dense.md, "Filling from confident
+// (ConfidentPlaneFillOptions; docs/refinement-measurements.md, "Filling from confident
 // planes"). The confidence map itself is left as it was: a filled pixel
 // keeps its low confidence, so that fusion and the geometric filter still
 // treat it as a guess.

@@ -8,7 +8,7 @@
 // already has. Where the network put a whole region on a wrong surface
 // (wide baselines, repeated texture), the truth often correlates better than
 // the network's depth (on realval's 21 MVS pairs, about half of the pixels
-// more than 2 % off: docs/dense.md, "The sweep"), but no candidate reaches
+// more than 2 % off: docs/refinement-measurements.md, "The sweep"), but no candidate reaches
 // it. A sweep over the network's own inverse-depth range tries every depth
 // at every pixel once.
 //

@@ -352,7 +352,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
     // coarse pass's map is a candidate, taken where it correlates better.
     coarse_options.unseen_slope_radius = 0;
     // Long-range planes at full resolution only: in the coarse pass too
-    // they gained 0.001 on realval's MVS pairs (docs/dense.md).
+    // they gained 0.001 on realval's MVS pairs (docs/refinement-measurements.md).
     coarse_options.trusted_plane_min_ncc = 0.0;
     // Local planes run in the coarse pass too: its surface is the full
     // resolution's start (realval's MVS pairs within 2 % 0.612 against
@@ -462,7 +462,7 @@ PhotometricRefinement RefineDepthPhotometrically(const torch::Tensor& images,
       // Each anchor lends the plane fitted through the anchors around it,
       // its value there included, not its own depth: anchors along a wrong
       // block's border correlate well but sit a little off their surface,
-      // and a plane extended far magnifies that (docs/dense.md).
+      // and a plane extended far magnifies that (docs/refinement-measurements.md).
       const LeastSquaresPlane fit = LeastSquaresPlanes(w_out, anchor, kTrustedPlaneSlopeRadius);
       const torch::Tensor anchor_w = torch::where(fit.value > 0, fit.value, w_out);
       std::vector<torch::Tensor> nearest = {NearestAnchor(anchor)};

@@ -172,7 +172,7 @@ inline constexpr int64_t kTrustedPlaneSlopeRadius = 16;
 // A long-range plane takes a pixel at most this many times further than
 // its depth was (it may bring it nearer without bound). Without the bound the
 // 20 generated scenes' mean relative error rose from 0.361 to 0.403, for
-// 0.001 more pixels within 2 %; with it, 0.358 (docs/dense.md, "Long-range
+// 0.001 more pixels within 2 %; with it, 0.358 (docs/refinement-measurements.md, "Long-range
 // planes").
 inline constexpr double kTrustedPlaneMaxDepthRatio = 2.0;
 // The radius of PhotometricRefinement::signal_support, full-resolution pixels.

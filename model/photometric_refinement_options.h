@@ -18,7 +18,7 @@ struct PhotometricRefinementOptions {
   // shifted one can still confirm the pixel's surface. 2 by default:
   // realval's MVS pairs within 2 % 0.626 against 0.612 without shifts, the 20
   // generated scenes 0.5410 against 0.5342 (shift 1: 0.621, 3: 0.621;
-  // docs/dense.md, "Shifted windows").
+  // docs/refinement-measurements.md, "Shifted windows").
   int64_t window_shift = 2;
   // Hypotheses on each side of the start's depth. 2 since the sweep (below)
   // joined the coarse propagation in giving the search its reach (3 before,
@@ -31,7 +31,7 @@ struct PhotometricRefinementOptions {
   // seventh revision, 0.01 before: fine real texture such as carpet varies
   // by less than 0.01 over 7x7 pixels and still correlates (realval's MVS
   // pairs within 2 % 0.581 against 0.577, mvs_001 0.621 against 0.560; the
-  // 20 generated scenes 0.5077 against 0.5050; docs/dense.md).
+  // 20 generated scenes 0.5077 against 0.5050; docs/refinement-measurements.md).
   double min_texture = 0.005;
   // Propagation (photometric_refinement.h), 0 rounds = off:
   // candidates are the planes of the pixels `propagation_distance`, half
@@ -40,7 +40,7 @@ struct PhotometricRefinementOptions {
   // 2 since the NCC pass's AVX2 build (surface_ncc_rows.h) made two rounds at
   // scale 2 cheaper than one was: realval's MVS pairs within 2 % 0.537
   // against 0.526 for one round (stage 28), 1.29-1.34x the network's time in
-  // fp32 and 1.38-1.43x in bf16 (docs/dense.md, "Propagation").
+  // fp32 and 1.38-1.43x in bf16 (docs/refinement-measurements.md, "Propagation").
   int64_t propagation_rounds = 2;
   int64_t propagation_distance = 32;
   int64_t propagation_levels = 4;
@@ -52,7 +52,7 @@ struct PhotometricRefinementOptions {
   // better at full resolution than the network's, the full-resolution search
   // starts from it. 2 by default: realval's 21 MVS pairs within 2 % 0.509
   // against 0.463 for the search alone, in about the search's old time
-  // (docs/dense.md, "Propagation").
+  // (docs/refinement-measurements.md, "Propagation").
   int64_t propagation_scale = 2;
   // With propagation_scale 2 or 4: rounds of propagation at full resolution
   // after the full-resolution search, with full_resolution_levels jumps from
@@ -61,7 +61,7 @@ struct PhotometricRefinementOptions {
   // pixels. The coarse rounds find the surface; this round gives it planes
   // fitted at full resolution: realval's MVS pairs within 2 % 0.554 against
   // 0.537 without it, in 1.30-1.36x the network's time in fp32 and 1.38x in
-  // bf16 (three levels: 0.556, but bf16 up to 1.50x; docs/dense.md, "A
+  // bf16 (three levels: 0.556, but bf16 up to 1.50x; docs/refinement-measurements.md, "A
   // full-resolution round after the coarse ones"). One level since the
   // long-range planes come from four sides (trusted_plane_axis_anchors),
   // which pays for their four candidates: realval 0.603 against 0.604 with
@@ -77,7 +77,7 @@ struct PhotometricRefinementOptions {
   // search's steps fell from 3 to 2 (the time): realval's MVS pairs within
   // 2 % 0.577 against 0.554 before, the 20 generated scenes 0.5050 against
   // 0.5041, in 1.36-1.37x the network's time in fp32 and 1.44-1.47x in
-  // bf16, against 1.30-1.36x and 1.38-1.40x (docs/dense.md, "The sweep").
+  // bf16, against 1.30-1.36x and 1.38-1.40x (docs/refinement-measurements.md, "The sweep").
   int64_t sweep_hypotheses = 128;
   double sweep_step_pixels = 2.0;
   // Pixels no source sees at the refined depth (nearest_plane.h), 0 = off:
@@ -86,14 +86,14 @@ struct PhotometricRefinementOptions {
   // (2 unseen_slope_radius + 1)^2 such pixels around it, extended over them
   // where its inverse depth is within kUnseenMaxChange of the network's
   // (photometric_refinement.h). realval's MVS pairs within 2 % 0.584
-  // against 0.581 without, the mean relative error unchanged (docs/dense.md,
+  // against 0.581 without, the mean relative error unchanged (docs/refinement-measurements.md,
   // "Fine texture, and pixels no source sees").
   int64_t unseen_slope_radius = 16;
   // Long-range planes (photometric_refinement.h), 0 = off: after the
   // full-resolution propagation every pixel tries the plane of the nearest
   // refined pixel whose NCC is at least this, kept where it correlates
   // better. realval's MVS pairs within 2 % 0.596 against 0.584 without,
-  // the 20 generated scenes 0.5093 against 0.5079 (docs/dense.md,
+  // the 20 generated scenes 0.5093 against 0.5079 (docs/refinement-measurements.md,
   // "Long-range planes").
   double trusted_plane_min_ncc = 0.9;
   // With long-range planes, how many more anchors each pixel tries: 0, the
@@ -102,7 +102,7 @@ struct PhotometricRefinementOptions {
   // anchor lies on another surface, an anchor on another side of the wrong
   // block lies on the right one. realval's MVS pairs within 2 % 0.604
   // (4) against 0.601 (2) and 0.598 (0), with two full-resolution levels;
-  // each costs one more candidate (docs/dense.md, "Long-range planes from
+  // each costs one more candidate (docs/refinement-measurements.md, "Long-range planes from
   // four sides").
   int64_t trusted_plane_axis_anchors = 4;
   // Local planes (local_planes.h), radius 0 = off: last, every pixel's
@@ -114,7 +114,7 @@ struct PhotometricRefinementOptions {
   // plane through the neighbours averages them out, and the bound keeps it
   // from crossing a depth edge. realval's MVS pairs within
   // 2 % 0.612 against 0.603, their geometric maps 0.490 against 0.440
-  // (radius 2, 0.03; docs/dense.md, "Local planes").
+  // (radius 2, 0.03; docs/refinement-measurements.md, "Local planes").
   int64_t local_plane_radius = 2;
   double local_plane_max_change = 0.03;
 
@@ -141,7 +141,7 @@ struct ConfidentPlaneFillOptions {
   // below 0 (the default) = off: it is a prior of large planes, which wins
   // on realval's photographs of buildings and rooms (within 2 % 0.626
   // against 0.584 with below 0.5) and loses on the generated scenes of
-  // separate objects (0.422 against 0.508; docs/dense.md, "Filling from
+  // separate objects (0.422 against 0.508; docs/refinement-measurements.md, "Filling from
   // confident planes").
   double below = 0.0;
   double anchor = 0.7;

@@ -387,7 +387,7 @@ TEST(PhotometricRefinementTest, DefaultsRepairTheBlockAtHalfResolution) {
   // The defaults as they are, with the shifted windows. Measured: the
   // block's median 0.077 %, the interior's 0.091 %: on one perfect plane a
   // pixel may take the step that suits a window shifted two pixels away, a
-  // bias under 0.1 % (docs/dense.md, "Shifted windows").
+  // bias under 0.1 % (docs/refinement-measurements.md, "Shifted windows").
   const PhotometricRefinement shifted = refine(defaults);
   const torch::Tensor error_shifted = RelativeError(shifted.depth, scene.depth);
   EXPECT_LT(error_shifted.masked_select(block).median().item<float>(), 0.002);
